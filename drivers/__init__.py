@@ -1,0 +1,4 @@
+"""Device drivers: bytes and devices, nothing about Zernike terms.
+
+Filled by the instrument issues (camera, phase shifter, PLC link).
+"""

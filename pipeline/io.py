@@ -1,0 +1,105 @@
+"""Reading maps and masks from files: the one place where wavestack touches file formats.
+
+Every reader raises :class:`InputError`, whose message names the file and what was expected,
+so that a command line can print it as one line.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+_IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp"}
+
+
+class InputError(ValueError):
+    """A file that cannot be used: missing, unreadable, or not of the expected kind."""
+
+
+def _existing(path: str | Path) -> Path:
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    return path
+
+
+def _load_npy(path: Path) -> NDArray:
+    try:
+        return np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as error:
+        raise InputError(f"{path}: not a readable .npy array ({error})") from None
+
+
+def load_map(path: str | Path) -> NDArray[np.float64]:
+    """Read a wavefront or surface map from a ``.npy`` file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.npy`` file holding a 2-D real array; NaN marks pixels outside the aperture.
+
+    Returns
+    -------
+    ndarray of float64, shape (rows, cols)
+
+    Raises
+    ------
+    InputError
+        If the file is missing or unreadable, not 2-D, not real-valued, or has no finite value.
+    """
+    path = _existing(path)
+    if path.suffix.lower() != ".npy":
+        raise InputError(f"{path}: expected a .npy map (2-D float array, NaN outside)")
+    array = _load_npy(path)
+    if array.ndim != 2 or 0 in array.shape:
+        raise InputError(f"{path}: expected a 2-D map, got an array of shape {array.shape}")
+    if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+        raise InputError(f"{path}: expected real numbers, got dtype {array.dtype}")
+    array = array.astype(np.float64)
+    if not np.isfinite(array).any():
+        raise InputError(f"{path}: every value is NaN or infinite; expected a map with valid pixels")
+    return array
+
+
+def load_mask(path: str | Path, shape: tuple[int, int] | None = None) -> NDArray[np.bool_]:
+    """Read a mask (non-zero = valid) from a ``.npy`` array or an image (PNG, TIFF, ...).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file; an image with several channels counts a pixel valid if any channel is
+        non-zero.
+    shape : (rows, cols), optional
+        The shape the mask must have (that of the map it belongs to).
+
+    Returns
+    -------
+    ndarray of bool, shape (rows, cols)
+
+    Raises
+    ------
+    InputError
+        If the file is missing or unreadable, not 2-D, or of the wrong shape.
+    """
+    path = _existing(path)
+    suffix = path.suffix.lower()
+    if suffix == ".npy":
+        array = _load_npy(path)
+        if array.dtype == object or np.iscomplexobj(array):
+            raise InputError(f"{path}: expected a real or boolean mask, got dtype {array.dtype}")
+    elif suffix in _IMAGE_SUFFIXES:
+        array = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if array is None:
+            raise InputError(f"{path}: not a readable image")
+        if array.ndim == 3:
+            array = array.any(axis=2)
+    else:
+        raise InputError(f"{path}: expected a .npy array or an image ({', '.join(sorted(_IMAGE_SUFFIXES))})")
+    if array.ndim != 2:
+        raise InputError(f"{path}: expected a 2-D mask, got an array of shape {array.shape}")
+    if shape is not None and array.shape != tuple(shape):
+        raise InputError(f"{path}: mask shape {array.shape} does not match the map's {tuple(shape)}")
+    return array != 0

@@ -1,0 +1,157 @@
+"""The small dense algebra behind a refit: normal equations with optional physical-term removal.
+
+A fitter stores one operator ``A = [H | E]`` of shape (N, M + k) on the aperture samples: the M
+basis columns ``H`` and, when piston/tilt/power removal is configured, k physical-term columns
+``E``. A frame then costs one product ``b = A^T w``; everything after it works on (M + k)-sized
+vectors with matrices factorised once here:
+
+* removal first, as interferometer software does it: ``d = (E^T E)^{-1} E^T w`` and
+  ``w' = w - E d``, so ``H^T w' = b_H - (H^T E) d`` and ``|w'|^2 = |w|^2 - d . b_E``;
+* the fit ``c = G^{-1} H^T w'`` with ``G = H^T H`` (Cholesky);
+* the residual from the normal-equation identity ``|w' - H c|^2 = |w'|^2 - c . H^T w'``, with no
+  second pass over the operator.
+
+Samples that turn out to be NaN in a frame are dropped by a rank-k downdate of the Gram matrix
+(``K - A_k^T A_k``) rather than by rebuilding the fitter.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import NDArray
+
+
+class IllConditionedBasis(ValueError):
+    """The basis is numerically rank-deficient on the samples (too many modes for the aperture)."""
+
+
+def _cholesky(matrix: NDArray[np.float64], what: str) -> tuple[NDArray[np.float64], bool]:
+    try:
+        return scipy.linalg.cho_factor(matrix, lower=False, check_finite=False)
+    except np.linalg.LinAlgError:
+        raise IllConditionedBasis(
+            f"{what}: the Gram matrix is not positive definite on these samples; "
+            "expected fewer modes or a larger aperture"
+        ) from None
+
+
+@dataclass(frozen=True)
+class SolvedFrame:
+    """Solution of one frame's normal equations (float64).
+
+    Attributes
+    ----------
+    basis : ndarray, shape (M,)
+        Coefficients of the basis columns.
+    removed : ndarray, shape (k,)
+        Coefficients of the removed physical-term columns (empty without removal).
+    residual_sq : float
+        Sum of squared residuals, clamped at zero.
+    """
+
+    basis: NDArray[np.float64]
+    removed: NDArray[np.float64]
+    residual_sq: float
+
+
+class NormalEquations:
+    """Factorised normal equations of an operator ``A = [H | E]`` on N samples.
+
+    Parameters
+    ----------
+    gram : ndarray, shape (M + k, M + k)
+        ``A^T A`` in float64.
+    column_sums : ndarray, shape (M + k,)
+        ``A^T 1``, used to restore the piston after the data were centred.
+    n_basis : int
+        M, the number of basis columns; the last ``k = gram.shape[0] - M`` columns are removed
+        before the fit.
+    n_samples : int
+        N.
+
+    Raises
+    ------
+    IllConditionedBasis
+        If ``H^T H`` or ``E^T E`` is not positive definite.
+    """
+
+    def __init__(
+        self,
+        gram: NDArray[np.float64],
+        column_sums: NDArray[np.float64],
+        n_basis: int,
+        n_samples: int,
+    ) -> None:
+        self.gram = gram
+        self.column_sums = column_sums
+        self.n_basis = n_basis
+        self.n_samples = n_samples
+        m = n_basis
+        self._basis_factor = _cholesky(gram[:m, :m], "basis")
+        self._has_removal = gram.shape[0] > m
+        if self._has_removal:
+            self._removal_factor = _cholesky(gram[m:, m:], "physical terms")
+            self._cross = gram[:m, m:]
+        # The response to a constant frame: a frame is centred before the product (which keeps
+        # float32 sums accurate) and its mean added back through this linear response.
+        self.constant_response = self._solve_centred(column_sums, float(n_samples))
+        self.constant_in_span = self.constant_response.residual_sq <= 1e-9 * n_samples
+
+    def solve(self, b: NDArray[np.float64], ww: float, mean: float) -> SolvedFrame:
+        """Solve for a frame given ``b = A^T (w - mean)`` and ``ww = |w - mean|^2``.
+
+        Parameters
+        ----------
+        b : ndarray, shape (M + k,)
+            Product of the operator with the centred samples.
+        ww : float
+            Squared norm of the centred samples.
+        mean : float
+            The value subtracted from the samples before the product (0 if none).
+
+        Returns
+        -------
+        SolvedFrame
+        """
+        centred = self._solve_centred(b, ww)
+        if mean == 0.0:
+            return centred
+        return SolvedFrame(
+            basis=centred.basis + mean * self.constant_response.basis,
+            removed=centred.removed + mean * self.constant_response.removed,
+            residual_sq=centred.residual_sq,
+        )
+
+    def _solve_centred(self, b: NDArray[np.float64], ww: float) -> SolvedFrame:
+        m = self.n_basis
+        b_basis = b[:m]
+        removed = np.zeros(0)
+        if self._has_removal:
+            removed = scipy.linalg.cho_solve(self._removal_factor, b[m:], check_finite=False)
+            b_basis = b_basis - self._cross @ removed
+            ww = ww - float(removed @ b[m:])
+        basis = scipy.linalg.cho_solve(self._basis_factor, b_basis, check_finite=False)
+        residual_sq = max(ww - float(basis @ b_basis), 0.0)
+        return SolvedFrame(basis=basis, removed=removed, residual_sq=residual_sq)
+
+    def without_rows(self, rows: NDArray[np.float64]) -> NormalEquations:
+        """Normal equations with some samples removed (rank-k downdate).
+
+        Parameters
+        ----------
+        rows : ndarray, shape (k, M + k_removal)
+            The operator rows of the samples to drop, in float64.
+
+        Returns
+        -------
+        NormalEquations
+        """
+        return NormalEquations(
+            self.gram - rows.T @ rows,
+            self.column_sums - rows.sum(axis=0),
+            self.n_basis,
+            self.n_samples - rows.shape[0],
+        )

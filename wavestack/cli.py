@@ -1,0 +1,66 @@
+"""The ``wavestack`` command line: parses arguments and hands each subcommand to its module.
+
+Only this layer prints. Bad input ends in one line on standard error and exit status 2, never a
+traceback; an unknown option gets argparse's usage error, also status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from collections.abc import Sequence
+
+from wavestack import __version__
+from wavestack.fit_command import add_fit_arguments, run_fit
+from wavestack.pipeline import InputError
+
+EXIT_BAD_INPUT = 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every subcommand."""
+    parser = argparse.ArgumentParser(
+        prog="wavestack",
+        description="Live wavefront metrology: fit Zernike terms to measured maps.",
+    )
+    parser.add_argument("--version", action="version", version=f"wavestack {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    fit = commands.add_parser(
+        "fit",
+        help="fit Zernike terms to a wavefront map (.npy)",
+        description="Fit Zernike terms to a 2-D wavefront map (.npy, NaN outside the aperture).",
+    )
+    add_fit_arguments(fit)
+    fit.set_defaults(handler=run_fit)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+        stream=sys.stderr,
+    )
+    try:
+        return int(args.handler(args, parser) or 0)
+    except (InputError, ValueError) as error:
+        logging.getLogger(__name__).debug("%s failed", args.command, exc_info=True)
+        print(f"wavestack {args.command}: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"wavestack {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+
+
+if __name__ == "__main__":
+    sys.exit(main())

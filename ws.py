@@ -1,0 +1,64 @@
+#!/usr/bin/env python3
+"""Set-up and entry point for a fresh machine: needs only python3.
+
+    python3 ws.py test [PYTEST-ARGS...]   run the test suite
+    python3 ws.py COMMAND [ARGS...]       run `wavestack COMMAND ARGS...` (e.g. `fit --example`)
+
+The first call creates ``.venv`` beside this file and installs wavestack into it (editable, with
+its test extras). Later calls reuse it; it is reinstalled only when ``pyproject.toml`` changes.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import venv
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent
+VENV = ROOT / ".venv"
+STAMP = VENV / ".wavestack-installed"
+
+
+def _venv_bin(name: str) -> Path:
+    return VENV / ("Scripts" if os.name == "nt" else "bin") / name
+
+
+def _wanted_stamp() -> str:
+    digest = hashlib.sha256((ROOT / "pyproject.toml").read_bytes()).hexdigest()
+    return f"{digest} {sys.version_info.major}.{sys.version_info.minor}"
+
+
+def ensure_environment() -> None:
+    """Create the virtual environment and install the project if it is missing or stale."""
+    if not _venv_bin("python").exists():
+        print(f"ws.py: creating {VENV.relative_to(ROOT)} ...", file=sys.stderr, flush=True)
+        venv.EnvBuilder(with_pip=True).create(VENV)
+    if STAMP.exists() and STAMP.read_text() == _wanted_stamp():
+        return
+    print("ws.py: installing wavestack and its test dependencies ...", file=sys.stderr, flush=True)
+    pip = [str(_venv_bin("python")), "-m", "pip", "--disable-pip-version-check", "-q"]
+    subprocess.run([*pip, "install", "-e", f"{ROOT}[test]"], check=True, cwd=ROOT)
+    STAMP.write_text(_wanted_stamp())
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0] in {"-h", "--help"}:
+        print(__doc__.strip())
+        return 0 if argv else 2
+    try:
+        ensure_environment()
+    except (subprocess.CalledProcessError, OSError) as error:
+        print(f"ws.py: set-up failed: {error}", file=sys.stderr)
+        return 1
+    if argv[0] == "test":
+        command = [str(_venv_bin("python")), "-m", "pytest", *argv[1:]]
+    else:
+        command = [str(_venv_bin("wavestack")), *argv]
+    return subprocess.run(command, cwd=ROOT).returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
