@@ -1,145 +1,53 @@
 """``build_fitter``: from an aperture to a ready :class:`~wavestack.pipeline.fitter.Fitter`.
 
-Each method turns the aperture's valid pixels into a set of basis columns on those samples:
+The work done once per aperture, in order:
 
-* ``circle``: Zernike circle polynomials over the pupil circle (default: the aperture's minimum
-  enclosing circle), the usual interferometer-software fit;
-* ``qr``: the same modes orthonormalised over the aperture's samples (Gram-Schmidt, Swantner &
-  Chow 1994, Appl. Opt. 33, 1832), done as CholeskyQR2 on the Gram matrix rather than a full
-  SVD or Householder QR of the pixel matrix (Fukaya et al. 2014: two Cholesky passes give an
-  orthogonality error at the level of rounding for kappa(H) up to about 1e8).
+1. the aperture and its pupil circle (default: the minimum enclosing circle of the valid
+   pixels), and the samples (valid pixels, in unit-disk coordinates of the pupil);
+2. the method's unit-RMS basis columns on the samples (:mod:`wavestack.pipeline.methods`;
+   for ``csf-qcm`` and ``conformal`` this builds the mesh and the map);
+3. the columns orthonormalised on the samples, ``H = Q R`` by CholeskyQR2
+   (:mod:`wavestack.pipeline.orthonormal`), and the physical piston/tilt/power columns likewise
+   when their removal is asked for;
+4. the operator ``[Q | Q_E]`` in the fit dtype, stored in the order that makes the per-frame
+   product fastest, the small normal equations, and the M x M maps from orthonormal
+   coefficients to the method's own.
 
-Every method then stores the same thing: its columns orthonormalised on the samples
-(``H = Q R``, CholeskyQR2) with ``R`` kept to convert coefficients. A refit projects onto ``Q``,
-whose Gram matrix is the identity, so its error grows with kappa(H) and not with
-kappa(G) = kappa(H)^2 as a Cholesky solve of ``H^T H`` would (measured on a 3.5:1 rectangle,
-36 modes, kappa(G) = 3.4e10: normal equations lose 3.6e-8 of 0.02-wave coefficients, the
-orthonormal route 1e-13). The expensive part is two N x M x M products and a few M x M
-factorisations; nothing is ever decomposed at the size of the pixel matrix.
+Nothing is ever decomposed at the size of the pixel matrix: the expensive part is a few
+N x M x M products.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 from numpy.typing import DTypeLike, NDArray
 
-from .aperture import Aperture
+from typing import TYPE_CHECKING
+
+from .aperture import Aperture, UnsupportedAperture
 from .conditioning import gram_condition, noise_gain, normalised_gram
 from .fitter import FitBasis, Fitter, FitterDiagnostics, Pupil
-from .normal_equations import NormalEquations, IllConditionedBasis
+from .methods import METHODS, MappingOptions, Samples, method_columns
+from .normal_equations import NormalEquations
+from .orthonormal import factor_quality, orthonormalise
 from .physical_terms import physical_term_basis, physical_term_names
-from .zernike import zernike_basis
 from .zernike_index import default_normalisation, mode_list, normalisation_factor
+
+if TYPE_CHECKING:
+    from .canonical_map import CanonicalMap
 
 logger = logging.getLogger(__name__)
 
 _ORDERINGS = ("noll", "ansi", "fringe")
 _DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+_FALLBACKS = (None, "qr")
 # A user-given pupil may cut the aperture; samples farther out than this are left out.
 _PUPIL_TOLERANCE = 1e-9
-
-
-@dataclass(frozen=True)
-class _Samples:
-    """The valid pixels of an aperture in unit-disk coordinates of the pupil."""
-
-    flat_index: NDArray[np.intp]
-    x: NDArray[np.float64]
-    y: NDArray[np.float64]
-    excluded: int
-
-
-@dataclass(frozen=True)
-class _Method:
-    """How a method turns samples into basis columns, and whether its output is orthonormal.
-
-    ``columns`` returns the unit-RMS basis ``H`` of shape (N, M) on the samples. With
-    ``orthonormal_output`` the fit reports coefficients of the orthonormalised columns (``qr``)
-    and converts them to the basis' own coefficients as ``circle_coefficients``; otherwise it
-    reports the basis' own coefficients directly.
-    """
-
-    columns: Callable[[_Samples, list[tuple[int, int]]], NDArray[np.float64]]
-    orthonormal_output: bool
-
-
-def _circle_columns(samples: _Samples, modes: list[tuple[int, int]]) -> NDArray[np.float64]:
-    return zernike_basis(modes, samples.x, samples.y, normalisation="rms")
-
-
-_METHODS: dict[str, _Method] = {
-    "circle": _Method(_circle_columns, orthonormal_output=False),
-    "qr": _Method(_circle_columns, orthonormal_output=True),
-}
-
-# Largest condition number of the sampled basis H (kappa(G) is its square) that still gives
-# meaningful coefficients: CholeskyQR2 is accurate up to about eps**-0.5 (Fukaya et al. 2014),
-# and past it the coefficients' noise gain exceeds 1e7 anyway.
-_MAX_BASIS_CONDITION = float(np.finfo(np.float64).eps) ** -0.5
-
-
-def available_methods() -> tuple[str, ...]:
-    """Names accepted by ``build_fitter(method=...)``."""
-    return tuple(_METHODS)
-
-
-def _orthonormalise(
-    columns: NDArray[np.float64], what: str
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """CholeskyQR2: ``columns = Q R`` with ``Q^T Q = N I`` (unit-RMS columns on the samples).
-
-    Two passes of "Cholesky of the Gram matrix, then ``Q = H R^-1``" give Q orthonormal to
-    rounding and a backward-stable R for kappa(H) up to about 1e8 (Fukaya, Nakatsukasa,
-    Yanagisawa & Yamamoto 2014, "CholeskyQR2: a simple and communication-avoiding algorithm
-    for computing a tall-skinny QR factorization"). The cost is two N x M x M products; the
-    N x M matrix is never decomposed itself.
-
-    Parameters
-    ----------
-    columns : ndarray, shape (N, M)
-    what : str
-        Name of the basis, for the error message.
-
-    Returns
-    -------
-    Q : ndarray, shape (N, M)
-    R : ndarray, shape (M, M), upper triangular with a positive diagonal
-
-    Raises
-    ------
-    IllConditionedBasis
-        If the columns are linearly dependent on the samples to working precision.
-    """
-    n = columns.shape[0]
-    q = columns
-    r_total = np.eye(columns.shape[1])
-    for _ in range(2):
-        try:
-            r = scipy.linalg.cholesky(q.T @ q / n, lower=False)
-        except np.linalg.LinAlgError:
-            r = None
-        if r is None or not np.isfinite(r).all():
-            raise IllConditionedBasis(
-                f"{what}: the {columns.shape[1]} columns are linearly dependent on these "
-                f"{n} samples; expected fewer modes or a larger aperture"
-            )
-        q = q @ scipy.linalg.solve_triangular(r, np.eye(r.shape[0]), lower=False)
-        r_total = r @ r_total
-    singular = np.linalg.svd(r_total, compute_uv=False)
-    if singular[0] > _MAX_BASIS_CONDITION * singular[-1]:
-        raise IllConditionedBasis(
-            f"{what}: kappa(G) = {(singular[0] / singular[-1]) ** 2:.3g} on these {n} samples; "
-            f"expected at most {_MAX_BASIS_CONDITION ** 2:.1g} (use fewer modes or method 'qr' "
-            "with fewer modes)"
-        )
-    return q, r_total
-
 
 # Storage order of the operator, chosen for the one product a refit makes (``w @ A``), from
 # OpenBLAS gemv on this project's machine, N = 630,548 samples, one thread, median ms
@@ -151,6 +59,11 @@ def _orthonormalise(
 _PIXEL_MAJOR_MAX_COLUMNS = 48
 
 
+def available_methods() -> tuple[str, ...]:
+    """Names accepted by ``build_fitter(method=...)``."""
+    return METHODS
+
+
 def _stored_operator(orthonormal: NDArray[np.float64], dtype: np.dtype) -> NDArray[np.floating]:
     """The operator as an (N, M) array in the storage order that makes ``w @ A`` fastest.
 
@@ -160,14 +73,6 @@ def _stored_operator(orthonormal: NDArray[np.float64], dtype: np.dtype) -> NDArr
     if orthonormal.shape[1] <= _PIXEL_MAJOR_MAX_COLUMNS:
         return np.ascontiguousarray(orthonormal, dtype=dtype)
     return np.ascontiguousarray(orthonormal.T, dtype=dtype).T
-
-
-def _factor_quality(triangular: NDArray[np.float64]) -> tuple[float, float]:
-    """kappa(G) and noise gain of ``G = R^T R`` from its triangular factor (singular values of R)."""
-    singular = np.linalg.svd(triangular, compute_uv=False)
-    kappa = float((singular[0] / singular[-1]) ** 2)
-    gain = float(np.sqrt(np.mean(singular**-2.0)))  # sqrt(trace(G^-1) / M)
-    return kappa, gain
 
 
 def _aperture_of(aperture_or_mask: Aperture | NDArray) -> Aperture:
@@ -189,32 +94,52 @@ def _pupil_of(aperture: Aperture, pupil: Pupil | tuple[float, float, float] | No
     return pupil
 
 
-def _samples_of(aperture: Aperture, pupil: Pupil, user_pupil: bool) -> _Samples:
+def _samples_of(aperture: Aperture, pupil: Pupil, user_pupil: bool) -> Samples:
     rows, cols = np.nonzero(aperture.mask)
     x = (cols - pupil.cx) / pupil.radius
     y = (pupil.cy - rows) / pupil.radius
-    flat = (rows * aperture.shape[1] + cols).astype(np.intp)
     excluded = 0
     if user_pupil:
         inside = x * x + y * y <= 1.0 + _PUPIL_TOLERANCE
         excluded = int(inside.size - np.count_nonzero(inside))
         if excluded:
             logger.warning("%d valid pixels lie outside the given pupil and are left out", excluded)
-            flat, x, y = flat[inside], x[inside], y[inside]
-    if flat.size == 0:
+            rows, cols, x, y = rows[inside], cols[inside], x[inside], y[inside]
+    if rows.size == 0:
         raise ValueError(f"pupil: no valid pixel of the aperture lies inside {pupil}")
-    return _Samples(flat, x, y, excluded)
+    flat = (rows * aperture.shape[1] + cols).astype(np.intp)
+    return Samples(flat, rows, cols, x, y, excluded)
 
 
-def _check_arguments(method: str, modes: int, ordering: str, dtype: np.dtype) -> None:
-    if method not in _METHODS:
-        raise ValueError(f"method: expected one of {', '.join(_METHODS)}, got {method!r}")
+def _check_arguments(
+    method: str, modes: int, ordering: str, dtype: np.dtype, fallback: str | None
+) -> None:
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if isinstance(modes, bool) or not isinstance(modes, (int, np.integer)) or modes < 1:
         raise ValueError(f"modes: expected a positive integer, got {modes!r}")
     if ordering not in _ORDERINGS:
         raise ValueError(f"ordering: expected one of {', '.join(_ORDERINGS)}, got {ordering!r}")
     if dtype not in _DTYPES:
         raise ValueError(f"dtype: expected float32 or float64, got {dtype}")
+    if fallback not in _FALLBACKS:
+        raise ValueError(f"fallback: expected None or 'qr', got {fallback!r}")
+
+
+def _mapping_diagnostics(mapping: CanonicalMap | None) -> dict[str, object]:
+    if mapping is None:
+        return {}
+    quality = mapping.quality
+    return {
+        "flips": quality.flips,
+        "max_beltrami": quality.max_beltrami,
+        "p95_beltrami": quality.p95_beltrami,
+        "area_scale_p5": quality.area_scale_p5,
+        "area_scale_p95": quality.area_scale_p95,
+        "r_in": mapping.r_in,
+        "csf_iterations": mapping.csf_iterations,
+        "mesh_vertices": mapping.mesh.n_vertices,
+    }
 
 
 def build_fitter(
@@ -227,6 +152,9 @@ def build_fitter(
     *,
     normalisation: str | None = None,
     remove: str | None = None,
+    laplacian: str = "cotangent",
+    mesh_vertices: int = 15000,
+    fallback: str | None = None,
 ) -> Fitter:
     """Precompute everything needed to refit frames on one aperture.
 
@@ -234,9 +162,12 @@ def build_fitter(
     ----------
     aperture_or_mask : Aperture or ndarray of shape (rows, cols)
         The aperture, or a mask (non-zero = valid) to build it from.
-    method : {"circle", "qr"}
+    method : {"circle", "qr", "conformal", "csf-qcm"}
         ``circle``: Zernike polynomials over the pupil circle. ``qr``: the same modes
         orthonormalised over the samples; ``FitResult.circle_coefficients`` converts back.
+        ``csf-qcm``: Zernike (or annular Zernike) polynomials on the CSF-QCM map of the aperture
+        onto the unit disk (or a concentric annulus). ``conformal``: the same on a discrete
+        conformal map (the baseline).
     modes : int
         Number of modes: the first ``modes`` terms of ``ordering`` (36 Noll terms reach n = 7;
         231 reach n = 20).
@@ -245,15 +176,23 @@ def build_fitter(
     pupil : Pupil or (cx, cy, r), optional
         The unit disk in pixels, cx a column and cy a row coordinate. Default: the aperture's
         minimum enclosing circle through the outermost valid pixel centres. Valid pixels outside
-        a given pupil are left out of the fit (counted in ``diagnostics``).
+        a given pupil are left out of the fit (counted in ``diagnostics``). For mapped methods
+        it only normalises the physical piston/tilt/power terms.
     dtype : {numpy.float32, numpy.float64}
         Type of the stored operator and the per-frame product; the factorisations are float64.
     normalisation : {"rms", "edge"}, optional
-        Output normalisation of circle coefficients; default: the ordering's own (unit RMS for
-        Noll and ANSI, unit edge value for Fringe).
+        Output normalisation of Zernike coefficients; default: the ordering's own (unit RMS for
+        Noll and ANSI, unit edge value for Fringe). Annular terms are always unit RMS.
     remove : {"ptt", "pttp"}, optional
         Fit and remove piston and tilt (and power) in physical coordinates before the fit; they
         are reported in ``FitResult.removed``.
+    laplacian : {"cotangent", "graph"}
+        Interior weights of the ``csf-qcm`` map (``graph`` is the paper-faithful mode).
+    mesh_vertices : int
+        Approximate vertex count of the aperture mesh of the mapped methods.
+    fallback : {None, "qr"}
+        With "qr", an aperture a mapped method cannot handle (several components or holes)
+        gives a ``qr`` fitter whose ``diagnostics.fallback`` says why, instead of an error.
 
     Returns
     -------
@@ -264,45 +203,79 @@ def build_fitter(
     ValueError
         For an invalid argument (the message names it), an empty aperture, or a pupil that
         misses the aperture.
+    UnsupportedAperture
+        For a mapped method on an aperture with several components or holes, without fallback.
     IllConditionedBasis
         If the modes are linearly dependent on the samples.
     """
-    started = time.perf_counter()
     dtype = np.dtype(dtype)
-    _check_arguments(method, modes, ordering, dtype)
+    _check_arguments(method, modes, ordering, dtype, fallback)
     normalisation = normalisation or default_normalisation(ordering)
     if normalisation not in ("rms", "edge"):
         raise ValueError(f"normalisation: expected 'rms' or 'edge', got {normalisation!r}")
-    removal_names = physical_term_names(remove) if remove is not None else ()
-
+    if remove is not None:
+        physical_term_names(remove)
+    options = MappingOptions(laplacian=laplacian, mesh_vertices=mesh_vertices)
+    settings = dict(
+        modes=int(modes), ordering=ordering, pupil=pupil, dtype=dtype,
+        normalisation=normalisation, remove=remove, options=options,
+    )
     aperture = _aperture_of(aperture_or_mask)
+    try:
+        return _build(aperture, method, **settings)
+    except UnsupportedAperture as error:
+        if fallback is None or method not in ("conformal", "csf-qcm"):
+            raise
+        logger.warning("%s cannot map this aperture (%s); falling back to qr", method, error)
+        fitter = _build(aperture, "qr", **settings)
+        fitter.diagnostics = dataclasses.replace(fitter.diagnostics, fallback=f"{method}: {error}")
+        return fitter
+
+
+def _build(
+    aperture: Aperture,
+    method: str,
+    *,
+    modes: int,
+    ordering: str,
+    pupil: Pupil | tuple[float, float, float] | None,
+    dtype: np.dtype,
+    normalisation: str,
+    remove: str | None,
+    options: MappingOptions,
+) -> Fitter:
+    started = time.perf_counter()
     resolved_pupil = _pupil_of(aperture, pupil)
     samples = _samples_of(aperture, resolved_pupil, user_pupil=pupil is not None)
     timings = {"aperture": time.perf_counter() - started}
+    mode_pairs = mode_list(ordering, modes)
+    annular = False
 
-    mode_pairs = mode_list(ordering, int(modes))
+    tick = time.perf_counter()
+    columns = method_columns(method, aperture, samples, mode_pairs, options)
+    timings["basis"] = time.perf_counter() - tick
+    if columns.mapping is not None:
+        timings.update({f"map_{stage}": seconds for stage, seconds in columns.mapping.timings.items()})
+        annular = columns.mapping.r_in is not None
+    # Annular terms are unit RMS over the annulus; the edge normalisation is a circle notion.
+    output_normalisation = "rms" if annular else normalisation
     scale = np.array(
-        [normalisation_factor(n, m, "rms") / normalisation_factor(n, m, normalisation)
+        [normalisation_factor(n, m, "rms") / normalisation_factor(n, m, output_normalisation)
          for n, m in mode_pairs]
     )
-    spec = _METHODS[method]
-    tick = time.perf_counter()
-    columns = spec.columns(samples, mode_pairs)
-    timings["basis"] = time.perf_counter() - tick
 
     tick = time.perf_counter()
-    orthonormal, triangular = _orthonormalise(columns, method)
-    del columns
-    kappa, gain = _factor_quality(triangular)
+    orthonormal, triangular = orthonormalise(columns.values, method)
+    kappa, gain = factor_quality(triangular)
     to_basis = scale[:, None] * scipy.linalg.solve_triangular(
         triangular, np.eye(len(mode_pairs)), lower=False
     )  # orthonormal coefficients -> the basis' own coefficients, in the output normalisation
     removal_transform = None
-    if removal_names:
+    if remove is not None:
         terms = physical_term_basis(samples.x, samples.y, remove)
-        terms_orthonormal, terms_triangular = _orthonormalise(terms, f"remove={remove}")
+        terms_orthonormal, terms_triangular = orthonormalise(terms, f"remove={remove}")
         removal_transform = scipy.linalg.solve_triangular(
-            terms_triangular, np.eye(len(removal_names)), lower=False
+            terms_triangular, np.eye(terms.shape[1]), lower=False
         )
         orthonormal = np.hstack([orthonormal, terms_orthonormal])
     operator = _stored_operator(orthonormal, dtype)
@@ -310,7 +283,7 @@ def build_fitter(
         orthonormal.T @ orthonormal, orthonormal.sum(axis=0), len(mode_pairs), samples.x.size
     )
     del orthonormal
-    if spec.orthonormal_output:
+    if method == "qr":
         coefficient_transform, circle_transform = np.eye(len(mode_pairs)), to_basis
         from_coefficients = np.eye(len(mode_pairs))
         own_gram = normalised_gram(equations.gram[: len(mode_pairs), : len(mode_pairs)], samples.x.size)
@@ -324,10 +297,11 @@ def build_fitter(
     basis = FitBasis(
         method=method,
         ordering=ordering,
-        normalisation="aperture-rms" if spec.orthonormal_output else normalisation,
+        normalisation="aperture-rms" if method == "qr" else output_normalisation,
         modes=tuple(mode_pairs),
         first_index=0 if ordering == "ansi" else 1,
         pupil=resolved_pupil,
+        annular_obscuration=columns.mapping.r_in if columns.mapping is not None else None,
     )
     diagnostics = FitterDiagnostics(
         method=method,
@@ -337,6 +311,7 @@ def build_fitter(
         gram_condition=kappa,
         noise_gain=gain,
         timings=timings,
+        **_mapping_diagnostics(columns.mapping),
     )
     logger.info(
         "built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
@@ -354,4 +329,5 @@ def build_fitter(
         circle_transform=circle_transform,
         removal=remove,
         removal_transform=removal_transform,
+        mapping=columns.mapping,
     )

@@ -16,10 +16,11 @@ cost. The residual map and its peak-to-valley take one more pass and are compute
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +28,9 @@ from numpy.typing import NDArray
 from .aperture import Aperture
 from .normal_equations import NormalEquations, SolvedFrame
 from .physical_terms import PhysicalTerms, terms_from_vector
+
+if TYPE_CHECKING:  # only for annotations: the fitter does not need the map's modules
+    from .canonical_map import CanonicalMap
 
 logger = logging.getLogger(__name__)
 
@@ -80,6 +84,9 @@ class FitBasis:
         Index of the first mode in the ordering (1 for Noll and Fringe, 0 for ANSI).
     pupil : Pupil
         The unit disk in pixels.
+    annular_obscuration : float or None
+        For a map onto an annulus: its inner radius, the obscuration ratio of the annular
+        Zernike terms the coefficients refer to; None for circle polynomials.
     """
 
     method: str
@@ -88,6 +95,7 @@ class FitBasis:
     modes: tuple[tuple[int, int], ...]
     first_index: int
     pupil: Pupil
+    annular_obscuration: float | None = None
 
 
 @dataclass(frozen=True)
@@ -109,7 +117,19 @@ class FitterDiagnostics:
     noise_gain : float
         Coefficient noise amplification against an orthonormal basis (1 for ``qr``).
     timings : mapping of str to float
-        Seconds per build stage, and "total".
+        Seconds per build stage, and "total" (mapped methods add ``map_*`` stages).
+    flips, max_beltrami, p95_beltrami : int, float, float or None
+        Mapped methods: flipped triangles and the Beltrami coefficient |mu| of the map.
+    area_scale_p5, area_scale_p95 : float or None
+        Mapped methods: 5th and 95th percentiles of the per-triangle area scale.
+    r_in : float or None
+        Inner radius of the canonical annulus (None for a disk or an unmapped method).
+    csf_iterations : int or None
+        Iterations of the curve-shortening flow (``csf-qcm``).
+    mesh_vertices : int or None
+        Vertices of the aperture mesh (mapped methods).
+    fallback : str or None
+        Why a mapped method fell back to ``qr``; None when no fallback happened.
     """
 
     method: str
@@ -119,18 +139,21 @@ class FitterDiagnostics:
     gram_condition: float
     noise_gain: float
     timings: Mapping[str, float] = field(default_factory=dict)
+    flips: int | None = None
+    max_beltrami: float | None = None
+    p95_beltrami: float | None = None
+    area_scale_p5: float | None = None
+    area_scale_p95: float | None = None
+    r_in: float | None = None
+    csf_iterations: int | None = None
+    mesh_vertices: int | None = None
+    fallback: str | None = None
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready form (the CLI's names)."""
-        return {
-            "method": self.method,
-            "topology": self.topology,
-            "valid_pixels": self.valid_pixels,
-            "excluded_outside_pupil": self.excluded_outside_pupil,
-            "gram_condition": self.gram_condition,
-            "noise_gain": self.noise_gain,
-            "timings": dict(self.timings),
-        }
+        values = dataclasses.asdict(self)
+        values["timings"] = dict(self.timings)
+        return values
 
 
 @dataclass(frozen=True)
@@ -201,6 +224,8 @@ class Fitter:
         "ptt" or "pttp" when physical terms are removed before the fit.
     removal_transform : ndarray, shape (k, k), optional
         Maps solved physical-term coefficients to piston, tilt (and power).
+    mapping : CanonicalMap, optional
+        The aperture map of a mapped method (``csf-qcm``, ``conformal``).
     """
 
     def __init__(
@@ -217,11 +242,13 @@ class Fitter:
         circle_transform: NDArray[np.float64] | None = None,
         removal: str | None = None,
         removal_transform: NDArray[np.float64] | None = None,
+        mapping: CanonicalMap | None = None,
     ) -> None:
         self.aperture = aperture
         self.basis = basis
         self.diagnostics = diagnostics
         self.removal = removal
+        self.mapping = mapping
         self._flat_index = flat_index
         self._operator = operator
         self._equations = equations
@@ -334,6 +361,31 @@ class Fitter:
             )
         values = self._operator[:, : self.n_modes] @ (self._from_coefficients @ coefficients)
         return self._scatter(values)
+
+    def export_state(self) -> dict[str, object]:
+        """Everything the per-frame path needs, as arrays and JSON-ready values.
+
+        Used by :mod:`wavestack.pipeline.fitter_store`; the operator is given in its storage
+        order (``operator_mode_major`` says whether it is the transposed (M, N) array).
+        """
+        mode_major = not self._operator.flags.c_contiguous
+        basis = dataclasses.asdict(self.basis)
+        return {
+            "flat_index": self._flat_index,
+            "operator": self._operator.T if mode_major else self._operator,
+            "operator_mode_major": np.array(mode_major),
+            "gram": self._equations.gram,
+            "column_sums": self._equations.column_sums,
+            "n_basis": np.array(self._equations.n_basis),
+            "n_samples": np.array(self._equations.n_samples),
+            "coefficient_transform": self._coefficient_transform,
+            "from_coefficients": self._from_coefficients,
+            "circle_transform": self._circle_transform,
+            "removal_transform": self._removal_transform,
+            "removal": self.removal,
+            "basis": basis,
+            "diagnostics": self.diagnostics.as_dict(),
+        }
 
     # -- per-frame helpers ------------------------------------------------------------------
 

@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from wavestack import __version__
+from wavestack.bench_command import add_bench_arguments, run_bench
 from wavestack.fit_command import add_fit_arguments, run_fit
 from wavestack.pipeline import InputError
 
@@ -35,6 +36,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_fit_arguments(fit)
     fit.set_defaults(handler=run_fit)
+    bench = commands.add_parser(
+        "bench", help="run a benchmark and print its figures",
+        description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables.",
+    )
+    add_bench_arguments(bench)
+    bench.set_defaults(handler=run_bench)
     return parser
 
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wavestack.paper_apertures import rounded_rectangle_mask
 from wavestack.pipeline import noll_to_nm, zernike_basis
 
 # A 3.5:1 rounded rectangle, the shape of a mirror in an off-axis three-mirror anastigmat.
@@ -42,24 +43,6 @@ class SyntheticExample:
     mask: NDArray[np.bool_]
     noise_rms: float
     description: str
-
-
-def rounded_rectangle_mask(
-    shape: tuple[int, int], half_length: float, half_width: float, corner: float
-) -> NDArray[np.bool_]:
-    """Mask of a centred rounded rectangle, long axis along x.
-
-    Parameters
-    ----------
-    shape : (rows, cols)
-    half_length, half_width, corner : float
-        Half sizes and corner radius in pixels.
-    """
-    rows, cols = np.indices(shape, dtype=np.float64)
-    x = np.abs(cols - (shape[1] - 1) / 2) - (half_length - corner)
-    y = np.abs(rows - (shape[0] - 1) / 2) - (half_width - corner)
-    outside = np.hypot(np.maximum(x, 0), np.maximum(y, 0))
-    return outside <= corner
 
 
 def synthetic_example(seed: int = 20261122) -> SyntheticExample:

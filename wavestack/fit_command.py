@@ -65,6 +65,14 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
         "--pupil", type=_pupil_argument, help="unit disk CX,CY,R in pixels (CX column, CY row)"
     )
     parser.add_argument("--remove", choices=("ptt", "pttp"), help="remove piston/tilt(/power) first")
+    parser.add_argument(
+        "--laplacian", choices=("cotangent", "graph"), default="cotangent",
+        help="interior weights of the csf-qcm map (graph: the paper's)",
+    )
+    parser.add_argument(
+        "--mesh-vertices", type=_positive_int, default=15000,
+        help="approximate mesh size of the mapped methods (15000)",
+    )
     parser.add_argument("--dtype", choices=tuple(_DTYPES), default="float64")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--save-fit", metavar="OUT.npy", help="save the fitted map (NaN outside)")
@@ -97,6 +105,8 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         pupil=args.pupil,
         dtype=_DTYPES[args.dtype],
         remove=args.remove,
+        laplacian=args.laplacian,
+        mesh_vertices=args.mesh_vertices,
     )
     started = time.perf_counter()
     result = fitter.fit(wavefront, residual=True)

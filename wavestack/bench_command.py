@@ -1,0 +1,29 @@
+"""``wavestack bench``: benchmarks that print figures (never timed tests)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from wavestack.bench_paper import format_markdown, rows_as_json, run_paper_benchmark
+from wavestack.paper_apertures import PAPER_APERTURES
+
+
+def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
+    """Declare the options of ``wavestack bench``."""
+    parser.add_argument("target", choices=("paper",), help="paper: the seed paper's Tables 1-3")
+    parser.add_argument("--json", action="store_true", help="print the rows as one JSON object")
+    parser.add_argument(
+        "--aperture", action="append", choices=tuple(PAPER_APERTURES),
+        help="only this aperture (repeatable; default: all)",
+    )
+
+
+def run_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Execute ``wavestack bench``; returns the exit status."""
+    rows = run_paper_benchmark(tuple(args.aperture) if args.aperture else None)
+    if args.json:
+        print(json.dumps({"benchmark": "paper", "rows": rows_as_json(rows)}))
+    else:
+        print(format_markdown(rows))
+    return 0
