@@ -91,7 +91,7 @@ def beltrami_coefficients(
     ----------
     .. [1] Yang et al., seed paper, section 2.4, Eq. (3).
     .. [2] K. Astala, T. Iwaniec and G. Martin, Elliptic Partial Differential Equations and
-       Quasiconformal Mappings in the Plane, Princeton (2009), section 2.1.
+       Quasiconformal Mappings in the Plane, Princeton (2009).
     """
     return _beltrami(*_edges(physical, canonical, triangles))
 

@@ -154,6 +154,7 @@ def build_fitter(
     remove: str | None = None,
     laplacian: str = "cotangent",
     mesh_vertices: int = 15000,
+    angular_balance: bool = True,
     fallback: str | None = None,
 ) -> Fitter:
     """Precompute everything needed to refit frames on one aperture.
@@ -190,6 +191,9 @@ def build_fitter(
         Interior weights of the ``csf-qcm`` map (``graph`` is the paper-faithful mode).
     mesh_vertices : int
         Approximate vertex count of the aperture mesh of the mapped methods.
+    angular_balance : bool
+        ``csf-qcm`` only: balance the map's area over angle (our addition to the paper's
+        method; False gives the paper's method alone).
     fallback : {None, "qr"}
         With "qr", an aperture a mapped method cannot handle (several components or holes)
         gives a ``qr`` fitter whose ``diagnostics.fallback`` says why, instead of an error.
@@ -215,7 +219,9 @@ def build_fitter(
         raise ValueError(f"normalisation: expected 'rms' or 'edge', got {normalisation!r}")
     if remove is not None:
         physical_term_names(remove)
-    options = MappingOptions(laplacian=laplacian, mesh_vertices=mesh_vertices)
+    options = MappingOptions(
+        laplacian=laplacian, mesh_vertices=mesh_vertices, angular_balance=bool(angular_balance)
+    )
     settings = dict(
         modes=int(modes), ordering=ordering, pupil=pupil, dtype=dtype,
         normalisation=normalisation, remove=remove, options=options,

@@ -63,10 +63,13 @@ class MappingOptions:
         Weights of the CSF-QCM interior solve.
     mesh_vertices : int
         Approximate vertex count of the aperture mesh.
+    angular_balance : bool
+        Balance the CSF-QCM map's area over angle (:mod:`wavestack.pipeline.angular_balance`).
     """
 
     laplacian: str = "cotangent"
     mesh_vertices: int = 15000
+    angular_balance: bool = True
 
     def __post_init__(self) -> None:
         if self.laplacian not in LAPLACIANS:
@@ -103,7 +106,12 @@ def canonical_map(aperture: Aperture, method: str, options: MappingOptions) -> C
     from .qcm import csf_qcm_map
 
     if method == "csf-qcm":
-        return csf_qcm_map(aperture, target_vertices=options.mesh_vertices, laplacian=options.laplacian)
+        return csf_qcm_map(
+            aperture,
+            target_vertices=options.mesh_vertices,
+            laplacian=options.laplacian,
+            angular_balance=options.angular_balance,
+        )
     return conformal_map(aperture, target_vertices=options.mesh_vertices)
 
 

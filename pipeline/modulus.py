@@ -157,7 +157,7 @@ def concentric_moebius_parameter(inner_centre_offset: float, inner_radius: float
 
     References
     ----------
-    .. [1] Z. Nehari, Conformal Mapping, McGraw-Hill (1952), ch. V (bilinear maps, symmetric
+    .. [1] Z. Nehari, Conformal Mapping, McGraw-Hill (1952) (bilinear maps and symmetric
        points); cited as [27] by the seed paper.
     """
     d, r = _checked_circles(inner_centre_offset, inner_radius)
@@ -213,7 +213,7 @@ def concentric_radius_of_circles(inner_centre_offset: float, inner_radius: float
 
     References
     ----------
-    .. [1] Z. Nehari, Conformal Mapping, McGraw-Hill (1952), ch. V.
+    .. [1] Z. Nehari, Conformal Mapping, McGraw-Hill (1952), bilinear maps and symmetric points.
     .. [2] Yang et al., seed paper, section 2.5, Eq. (7).
     """
     d, r = _checked_circles(inner_centre_offset, inner_radius)

@@ -148,3 +148,30 @@ def test_console_entry_point_runs_as_a_module() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["modes"] == 10
+
+
+def test_csf_qcm_fit_reports_map_diagnostics(capsys, tmp_path) -> None:
+    from wavestack.paper_apertures import annulus_circular_hole_mask
+
+    mask = annulus_circular_hole_mask(192)
+    rows, cols = np.indices(mask.shape)
+    path = tmp_path / "annulus.npy"
+    np.save(path, np.where(mask, 1e-4 * cols - 2e-4 * rows, np.nan))
+    report = run_json(capsys, "fit", str(path), "--method", "csf-qcm", "--mesh-vertices", "4000", "--json")
+    diagnostics = report["diagnostics"]
+    assert report["topology"] == "doubly-connected"
+    assert diagnostics["flips"] == 0 and diagnostics["max_beltrami"] < 1
+    assert 0 < diagnostics["r_in"] < 1 and diagnostics["csf_iterations"] > 0
+    assert {"area_scale_p5", "area_scale_p95", "p95_beltrami", "fallback"} <= set(diagnostics)
+    assert any(stage.startswith("map_") for stage in report["timings"])
+
+
+def test_bench_paper_prints_rows_for_one_aperture(capsys) -> None:
+    assert main(["bench", "paper", "--aperture", "rounded-rectangle", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)["rows"]
+    labels = {row["label"] for row in rows}
+    assert labels == {"circle", "qr", "conformal", "csf-qcm (graph)", "csf-qcm (cotangent)",
+                      "csf-qcm (cotangent, balanced)"}
+    by_label = {row["label"]: row for row in rows}
+    assert by_label["qr"]["kappa"] == pytest.approx(1.0)
+    assert by_label["csf-qcm (cotangent, balanced)"]["flips"] == 0

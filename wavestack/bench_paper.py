@@ -37,12 +37,14 @@ MODES = 36
 TRUTH_PV_WAVES = 0.05
 NOISE_RMS_WAVES = 0.001
 SEEDS = (1, 2, 3, 4, 5)
+# (method, laplacian, angular balance); the unbalanced rows are the paper's method alone.
 METHODS = (
-    ("circle", "cotangent"),
-    ("qr", "cotangent"),
-    ("conformal", "cotangent"),
-    ("csf-qcm", "cotangent"),
-    ("csf-qcm", "graph"),
+    ("circle", "cotangent", False),
+    ("qr", "cotangent", False),
+    ("conformal", "cotangent", False),
+    ("csf-qcm", "graph", False),
+    ("csf-qcm", "cotangent", False),
+    ("csf-qcm", "cotangent", True),
 )
 
 # The paper's own figures (Tables 1-3), for the side-by-side columns.
@@ -60,6 +62,7 @@ class PaperRow:
     aperture: str
     method: str
     laplacian: str
+    angular_balance: bool
     kappa: float
     noise_gain: float
     flips: int | None
@@ -79,7 +82,9 @@ class PaperRow:
     @property
     def label(self) -> str:
         """Method name with its weights where they matter."""
-        return f"{self.method} ({self.laplacian})" if self.method == "csf-qcm" else self.method
+        if self.method != "csf-qcm":
+            return self.method
+        return f"csf-qcm ({self.laplacian}{', balanced' if self.angular_balance else ''})"
 
 
 def _truths(aperture: Aperture, seed: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -104,22 +109,25 @@ def _fit_error(fitter, aperture: Aperture, values: NDArray[np.float64], truth: N
     return float(np.sqrt(np.mean(error**2))), float(np.ptp(error))
 
 
-def _basis_change(aperture: Aperture, method: str, laplacian: str) -> float:
+def _basis_change(aperture: Aperture, method: str, laplacian: str, balance: bool) -> float:
     rows, cols = np.nonzero(aperture.mask)
     samples = Samples(rows * aperture.shape[1] + cols, rows, cols, cols * 0.0, rows * 0.0, 0)
     modes = mode_list("noll", MODES)
     coarse, fine = (
-        mapped_columns(canonical_map(aperture, method, MappingOptions(laplacian, vertices)), samples, modes)
+        mapped_columns(canonical_map(aperture, method, MappingOptions(laplacian, vertices, balance)), samples, modes)
         for vertices in (5000, 15000)
     )
     return float(np.linalg.norm(coarse - fine) / np.linalg.norm(fine))
 
 
-def benchmark_row(name: str, method: str, laplacian: str, size: int = 512) -> PaperRow:
+def benchmark_row(name: str, method: str, laplacian: str, balance: bool, size: int = 512) -> PaperRow:
     """Measure one aperture with one method (see the module docstring)."""
     aperture = Aperture.from_mask(PAPER_APERTURES[name](size))
     started = time.perf_counter()
-    fitter = build_fitter(aperture, method=method, modes=MODES, dtype=np.float64, laplacian=laplacian)
+    fitter = build_fitter(
+        aperture, method=method, modes=MODES, dtype=np.float64, laplacian=laplacian,
+        angular_balance=balance,
+    )
     build_seconds = time.perf_counter() - started
     d = fitter.diagnostics
     physical, smooth, noisy = [], [], []
@@ -137,6 +145,7 @@ def benchmark_row(name: str, method: str, laplacian: str, size: int = 512) -> Pa
         aperture=name,
         method=method,
         laplacian=laplacian,
+        angular_balance=balance,
         kappa=d.gram_condition,
         noise_gain=d.noise_gain,
         flips=d.flips,
@@ -149,7 +158,7 @@ def benchmark_row(name: str, method: str, laplacian: str, size: int = 512) -> Pa
         smooth_pv=float(np.median([e[1] for e in smooth])),
         noisy_rms=float(np.median(noisy)),
         canonical_rms=canonical_rms,
-        basis_change=_basis_change(aperture, method, laplacian) if mapped else None,
+        basis_change=_basis_change(aperture, method, laplacian, balance) if mapped else None,
         build_seconds=build_seconds,
         timings={k: float(v) for k, v in d.timings.items()},
     )
@@ -159,9 +168,9 @@ def run_paper_benchmark(apertures: tuple[str, ...] | None = None, size: int = 51
     """Every aperture with every method; returns the rows in table order."""
     rows = []
     for name in apertures or tuple(PAPER_APERTURES):
-        for method, laplacian in METHODS:
-            logger.info("bench paper: %s, %s (%s)", name, method, laplacian)
-            rows.append(benchmark_row(name, method, laplacian, size))
+        for method, laplacian, balance in METHODS:
+            logger.info("bench paper: %s, %s (%s, balance %s)", name, method, laplacian, balance)
+            rows.append(benchmark_row(name, method, laplacian, balance, size))
     return rows
 
 
@@ -193,19 +202,21 @@ def format_markdown(rows: list[PaperRow]) -> str:
         f"Setup (b), truth built in each method's own basis: largest fit error over all rows "
         f"{canonical:.1e} waves RMS (every least-squares method is exact on its own basis).",
         "",
-        "| aperture | paper kappa baseline / CSF-QCM | ours conformal / csf-qcm | paper RMS baseline / "
-        "CSF-QCM | ours (a) conformal / csf-qcm | paper total s | ours csf-qcm build s |",
+        "| aperture | paper kappa: baseline / CSF-QCM | ours: conformal / csf-qcm graph (paper's) / "
+        "csf-qcm balanced (default) | paper RMS: baseline / CSF-QCM | ours (a): conformal / graph / "
+        "balanced | paper total s | ours build s (balanced) |",
         "|---|---|---|---|---|---:|---:|",
     ]
     for name, (paper_base, paper_qcm) in PAPER_KAPPA.items():
         mine = {r.label: r for r in rows if r.aperture == name}
-        if "conformal" not in mine or "csf-qcm (cotangent)" not in mine:
+        if not {"conformal", "csf-qcm (graph)", "csf-qcm (cotangent, balanced)"} <= set(mine):
             continue
-        conf, qcm = mine["conformal"], mine["csf-qcm (cotangent)"]
+        conf, paper, ours = mine["conformal"], mine["csf-qcm (graph)"], mine["csf-qcm (cotangent, balanced)"]
         lines.append(
-            f"| {name} | {paper_base} / {paper_qcm} | {conf.kappa:.4g} / {qcm.kappa:.4g} | "
-            f"{PAPER_RMS[name][0]} / {PAPER_RMS[name][1]} | {conf.physical_rms:.2e} / "
-            f"{qcm.physical_rms:.2e} | {PAPER_TOTAL_S[name]} | {qcm.build_seconds:.2f} |"
+            f"| {name} | {paper_base} / {paper_qcm} | {conf.kappa:.4g} / {paper.kappa:.4g} / "
+            f"{ours.kappa:.4g} | {PAPER_RMS[name][0]} / {PAPER_RMS[name][1]} | "
+            f"{conf.physical_rms:.2e} / {paper.physical_rms:.2e} / {ours.physical_rms:.2e} | "
+            f"{PAPER_TOTAL_S[name]} | {ours.build_seconds:.2f} |"
         )
     return "\n".join(lines)
 

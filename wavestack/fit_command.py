@@ -73,6 +73,10 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
         "--mesh-vertices", type=_positive_int, default=15000,
         help="approximate mesh size of the mapped methods (15000)",
     )
+    parser.add_argument(
+        "--no-angular-balance", action="store_true",
+        help="csf-qcm: the paper's map alone, without wavestack's angular area balancing",
+    )
     parser.add_argument("--dtype", choices=tuple(_DTYPES), default="float64")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--save-fit", metavar="OUT.npy", help="save the fitted map (NaN outside)")
@@ -107,6 +111,7 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         remove=args.remove,
         laplacian=args.laplacian,
         mesh_vertices=args.mesh_vertices,
+        angular_balance=not args.no_angular_balance,
     )
     started = time.perf_counter()
     result = fitter.fit(wavefront, residual=True)
