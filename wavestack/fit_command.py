@@ -189,7 +189,7 @@ def format_report(report: dict[str, Any]) -> str:
         lines.append(
             f"warning     noise gain {diagnostics['noise_gain']:.3g}: these modes are nearly "
             "degenerate on this aperture, so noise swamps the individual coefficients even where "
-            "the fitted map is good; fit fewer modes or a mapped basis"
+            "the fitted map is good; fit fewer modes or map the aperture (--method csf-qcm)"
         )
     if "truth_error_rms" in report:
         lines.append(f"truth       fitted map vs noise-free truth: RMS {report['truth_error_rms']:.3g}")
