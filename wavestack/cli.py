@@ -13,6 +13,7 @@ import sys
 from collections.abc import Sequence
 
 from wavestack import __version__
+from wavestack.analyze_command import add_analyze_arguments, run_analyze
 from wavestack.bench_command import add_bench_arguments, run_bench
 from wavestack.fit_command import add_fit_arguments, run_fit
 from wavestack.pipeline import InputError
@@ -36,6 +37,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_fit_arguments(fit)
     fit.set_defaults(handler=run_fit)
+    analyze = commands.add_parser(
+        "analyze",
+        help="interferograms (a phase-shifted set or one carrier frame) or a .dat/.datx file to Zernike terms",
+        description="Analyse interferograms or instrument files: phase, aperture, unwrap, fit.",
+    )
+    add_analyze_arguments(analyze)
+    analyze.set_defaults(handler=run_analyze)
     bench = commands.add_parser(
         "bench", help="run a benchmark and print its figures",
         description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables.",

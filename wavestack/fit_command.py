@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from wavestack.arguments import positive_int
 from wavestack.example import synthetic_example
 from wavestack.pipeline import (
     Aperture,
@@ -40,16 +41,6 @@ def _pupil_argument(text: str) -> Pupil:
     return Pupil(cx, cy, r)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
-    return value
-
-
 def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``wavestack fit``."""
     source = parser.add_mutually_exclusive_group(required=True)
@@ -59,7 +50,7 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--mask", help="mask (.npy or image, non-zero = valid); default: finite pixels")
     parser.add_argument("--method", choices=available_methods(), default="circle")
-    parser.add_argument("--modes", type=_positive_int, default=36, help="number of modes (36)")
+    parser.add_argument("--modes", type=positive_int, default=36, help="number of modes (36)")
     parser.add_argument("--ordering", choices=("noll", "ansi", "fringe"), default="noll")
     parser.add_argument(
         "--pupil", type=_pupil_argument, help="unit disk CX,CY,R in pixels (CX column, CY row)"
@@ -70,7 +61,7 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
         help="interior weights of the csf-qcm map (graph: the paper's)",
     )
     parser.add_argument(
-        "--mesh-vertices", type=_positive_int, default=15000,
+        "--mesh-vertices", type=positive_int, default=15000,
         help="approximate mesh size of the mapped methods (15000)",
     )
     parser.add_argument(
