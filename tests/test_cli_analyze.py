@@ -11,9 +11,10 @@ import pytest
 
 from wavestack.cli import main
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+from shared_data import DATA, require_shared_data
+
 PSI = DATA / "psi-mirror-654nm"
-pytestmark = pytest.mark.skipif(not PSI.is_dir(), reason="../shared/data is not beside the checkout")
+pytestmark = require_shared_data()
 
 
 def _run(capsys, *argv: str) -> dict:

@@ -19,12 +19,13 @@ from wavestack.pipeline.images import read_frame, read_frame_set
 from wavestack.pipeline.measurement import wavefront_from_carrier, wavefront_from_phase_shifts
 from wavestack.pipeline.zygo import read_metropro_dat
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+from shared_data import DATA, require_shared_data
+
 PSI = DATA / "psi-mirror-654nm"
 MIRROR = ConicTest(radius_of_curvature_mm=1215.0, diameter_mm=152.2, wavelength_nm=654.0)
 MODES = 15
 
-pytestmark = pytest.mark.skipif(not PSI.is_dir(), reason="../shared/data is not beside the checkout")
+pytestmark = require_shared_data()
 
 
 def _coefficients(measured) -> np.ndarray:
