@@ -19,12 +19,8 @@ import numpy as np
 import scipy.sparse
 from numpy.typing import NDArray
 
+from .angles import wrap_angle
 from .laplacian import DirichletSolver
-
-
-def wrap_angle(angle: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Principal value of an angle, in (-pi, pi]."""
-    return np.pi - np.mod(np.pi - angle, 2.0 * np.pi)
 
 
 def unwrap_loop(angles: NDArray[np.float64]) -> NDArray[np.float64]:

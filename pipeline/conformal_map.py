@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .annulus_angle import wrap_angle
+from .angles import wrap_angle
 from .aperture import Aperture
 from .beltrami import map_quality
 from .canonical_map import CanonicalMap, align_rotation, point_inside_hole, vertex_areas

@@ -36,6 +36,8 @@ from numbers import Real
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .angles import wrap_angle
+
 logger = logging.getLogger(__name__)
 
 _BLOCK_PIXELS = 1 << 16  # pixels per block of the final demodulation: N frames + outputs stay in cache
@@ -183,12 +185,6 @@ def _lsq_weights(steps: NDArray[np.float64], name: str) -> NDArray[np.float64]:
             f"got {np.round(np.degrees(steps), 3).tolist()} degrees"
         )
     return np.linalg.pinv(design)
-
-
-def _wrap(angle: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Angles wrapped to (-pi, pi]."""
-    wrapped = np.angle(np.exp(1j * np.asarray(angle, dtype=np.float64)))
-    return np.where(wrapped <= -np.pi, np.pi, wrapped)
 
 
 def _apply(weights: NDArray[np.float64], values: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -548,7 +544,7 @@ def advanced_iterative_psi(
     for iterations in range(1, int(max_iterations) + 1):
         coefficients = _apply(_lsq_weights(steps, "frames (estimated steps)"), sample)
         updated = _normalise_steps(_fit_steps(sample, coefficients), None)
-        change = float(np.max(np.abs(_wrap(updated - steps))))
+        change = float(np.max(np.abs(wrap_angle(updated - steps))))
         steps = updated
         if change < tolerance:
             break

@@ -80,6 +80,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from .aperture import EmptyAperture
+from .aperture_detect import aperture_iou
 
 __all__ = [
     "SpatialParams",
@@ -420,7 +421,7 @@ class TemporalUnwrapper:
             reason = f"frame shape changed from {previous.shape} to {valid.shape}"
             return self._spatial(values, valid, reason, align=False)
         if not np.array_equal(valid, previous_mask):
-            reason = f"mask changed (IoU {_iou(valid, previous_mask):.4f})"
+            reason = f"mask changed (IoU {aperture_iou(valid, previous_mask):.4f})"
             return self._spatial(values, valid, reason, align=True)
 
         with np.errstate(invalid="ignore"):  # NaN outside the mask: previous is NaN there
@@ -702,12 +703,6 @@ def _label_medians(
     if index.size == 1:  # the usual single pupil: a plain median is ~10x faster
         return np.array([np.median(values[labels == index[0]])])
     return np.asarray(ndimage.median(values, labels, index), dtype=np.float64).reshape(-1)
-
-
-def _iou(first: NDArray[np.bool_], second: NDArray[np.bool_]) -> float:
-    """Intersection over union of two masks of the same shape."""
-    union = np.count_nonzero(first | second)
-    return float(np.count_nonzero(first & second)) / union if union else 1.0
 
 
 def _is_real(value: object) -> bool:

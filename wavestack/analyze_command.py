@@ -132,9 +132,10 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         report["carrier_cycles_per_px"] = list(measured.carrier)
 
     tick = time.perf_counter()
-    circle = build_fitter(aperture, modes=max(args.modes, 11), dtype=np.float64)
-    pupil = circle.basis.pupil
     if test is not None:
+        # the implied conic reads Z11 of the raw map over the aperture's circle (Noll, unit RMS)
+        circle = build_fitter(aperture, modes=max(args.modes, 11), dtype=np.float64)
+        pupil = circle.basis.pupil
         raw_spherical = circle.fit(waves, nan_policy="omit").coefficients[10]
         report["implied_conic"] = implied_conic_constant(raw_spherical, test)
         report["measured_spherical_waves"] = raw_spherical
