@@ -1,4 +1,21 @@
 """Device drivers: bytes and devices, nothing about Zernike terms.
 
-Filled by the instrument issues (camera, phase shifter, PLC link).
+Common ground lives here (frames, the frame ring, typed errors, the safety stage every actuator
+output passes); each device family has its own package with a pure ``protocol`` side and an I/O
+side: :mod:`~wavestack.drivers.u3v` (USB3 Vision cameras over pyusb),
+:mod:`~wavestack.drivers.mdt693b` (Thorlabs piezo controllers over pyserial) and
+:mod:`~wavestack.drivers.plc` (the polishing-station PLC over Modbus/TCP). The family packages are
+imported explicitly, so importing this one loads no USB, serial or Modbus library.
 """
+
+from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, LimitError, ProtocolError
+from wavestack.drivers.frames import Frame, FrameSource, SlopeFrame, SlopeSource
+from wavestack.drivers.ring import FrameRing, RingCounters, RingPolicy
+from wavestack.drivers.safety import SafeOutput, SafetyLimits, SafetyStage, SafetyStatus
+
+__all__ = [
+    "DeviceDisconnected", "DeviceError", "DeviceTimeout", "LimitError", "ProtocolError",
+    "Frame", "FrameSource", "SlopeFrame", "SlopeSource",
+    "FrameRing", "RingCounters", "RingPolicy",
+    "SafeOutput", "SafetyLimits", "SafetyStage", "SafetyStatus",
+]

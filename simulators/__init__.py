@@ -1,5 +1,16 @@
 """Simulated instruments: each device seen from the other end of the wire.
 
-Filled by the instrument issues; a simulator re-implements the device side from the protocol
-description and never imports the driver's parser.
+A simulator re-implements the device side from the protocol description and never imports the
+driver's parser. Families: :mod:`~wavestack.simulators.u3v` (a pyusb backend serving a USB3
+Vision camera), :mod:`~wavestack.simulators.mdt693b` (the piezo controller behind ``sim://`` or a
+pseudo-terminal), :mod:`~wavestack.simulators.plc` (a pymodbus server with a watchdog and a
+polishing model). :mod:`~wavestack.simulators.optic` and :mod:`~wavestack.simulators.spots` render
+what the cameras see, :mod:`~wavestack.simulators.bench` wires camera, piezo and optic together.
+
+The ``sim://`` URL handler for pyserial is registered only by an explicit call to
+:func:`register_serial_simulators`.
 """
+
+from wavestack.simulators.serial_registry import attach_simulated_device, register_serial_simulators
+
+__all__ = ["attach_simulated_device", "register_serial_simulators"]

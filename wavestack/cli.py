@@ -13,12 +13,15 @@ import sys
 from collections.abc import Sequence
 
 from wavestack import __version__
+from wavestack.drivers.errors import DeviceError
 from wavestack.analyze_command import add_analyze_arguments, run_analyze
 from wavestack.bench_command import add_bench_arguments, run_bench
 from wavestack.fit_command import add_fit_arguments, run_fit
 from wavestack.pipeline import InputError
+from wavestack.sim_command import add_sim_arguments, run_sim
 
 EXIT_BAD_INPUT = 2
+EXIT_DEVICE_ERROR = 3
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -50,6 +53,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_bench_arguments(bench)
     bench.set_defaults(handler=run_bench)
+    sim = commands.add_parser(
+        "sim", help="run a simulated instrument standalone (pzt, plc)",
+        description="Run one simulated instrument on its real transport until Ctrl-C or SIGTERM.",
+    )
+    add_sim_arguments(sim)
+    sim.set_defaults(handler=run_sim)
     return parser
 
 
@@ -64,6 +73,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     try:
         return int(args.handler(args, parser) or 0)
+    except DeviceError as error:
+        logging.getLogger(__name__).debug("%s failed", args.command, exc_info=True)
+        print(f"wavestack {args.command}: device error: {error}", file=sys.stderr)
+        return EXIT_DEVICE_ERROR
     except (InputError, ValueError) as error:
         logging.getLogger(__name__).debug("%s failed", args.command, exc_info=True)
         print(f"wavestack {args.command}: error: {error}", file=sys.stderr)

@@ -1,0 +1,84 @@
+"""Voltage limits of the MDT693B / MDT694B: an axis's effective range and the setpoint on the wire.
+
+The range :meth:`~wavestack.drivers.mdt693b.driver.MDT693B.set_voltage` accepts is the tightest of
+three: the driver's software limits, the controller's per-axis ``<axis>min?``/``<axis>max?`` and its
+front-panel limit switch (``vlimit?``). Pure functions and values, no I/O.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from wavestack.drivers.errors import LimitError
+
+
+@dataclass(frozen=True)
+class AxisLimits:
+    """The voltage range :meth:`MDT693B.set_voltage` accepts on one axis.
+
+    Attributes
+    ----------
+    min_v, max_v
+        Effective range, V: the higher of the software minimum and ``<axis>min?``; the lowest of
+        the software maximum, ``<axis>max?`` and the front-panel limit switch (``vlimit?``).
+    device_min_v, device_max_v
+        ``<axis>min?`` and ``<axis>max?`` as read at open, V.
+    vlimit_v
+        The limit switch setting, V (75, 100 or 150).
+    """
+
+    min_v: float
+    max_v: float
+    device_min_v: float
+    device_max_v: float
+    vlimit_v: float
+
+    def contains(self, volts: float) -> bool:
+        """True when ``min_v <= volts <= max_v``."""
+        return self.min_v <= volts <= self.max_v
+
+    def clamp(self, volts: float) -> float:
+        """``volts`` moved into ``[min_v, max_v]``."""
+        return min(max(volts, self.min_v), self.max_v)
+
+
+def _effective_limits(device: str, axis: str, *, software_min_v: float, software_max_v: float,
+                      device_min_v: float, device_max_v: float, vlimit_v: float) -> AxisLimits:
+    """The :class:`AxisLimits` of ``axis``: software limits narrowed by the device's and the limit switch.
+
+    Parameters
+    ----------
+    device
+        Who raises, in messages (the driver's name).
+    axis
+        ``"x"``, ``"y"`` or ``"z"``.
+    software_min_v, software_max_v
+        The driver's software limits, V.
+    device_min_v, device_max_v
+        ``<axis>min?`` and ``<axis>max?``, V.
+    vlimit_v
+        The front-panel limit switch (``vlimit?``), V.
+
+    Raises
+    ------
+    LimitError
+        The three ranges leave no usable voltage.
+    """
+    low = max(software_min_v, device_min_v)
+    high = min(software_max_v, device_max_v, vlimit_v)
+    if low > high:
+        raise LimitError(device, f"axis {axis} has no usable range: software "
+                         f"[{software_min_v:g}, {software_max_v:g}] V, device "
+                         f"[{device_min_v:g}, {device_max_v:g}] V, limit switch {vlimit_v:g} V")
+    return AxisLimits(low, high, device_min_v, device_max_v, vlimit_v)
+
+
+def _on_wire(volts: float, limits: AxisLimits) -> float:
+    """The voltage as sent (two decimals), kept inside ``limits`` when rounding would leave them."""
+    wire = round(volts, 2)
+    if wire > limits.max_v:
+        wire = math.floor(limits.max_v * 100) / 100
+    if wire < limits.min_v:
+        wire = math.ceil(limits.min_v * 100) / 100
+    return wire

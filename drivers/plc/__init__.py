@@ -1,0 +1,47 @@
+"""Modbus/TCP link to the polishing-station PLC (pymodbus 3.16).
+
+- :mod:`.codec`: float32/uint32 in two registers, byte orders ABCD, CDAB, BADC, DCBA (pure).
+- :mod:`.register_map`: the register map, the command block's layout and the write allow-list.
+- :mod:`.status`: status word, acknowledge and machine outputs as frozen values.
+- :mod:`.transport`: one pymodbus client with typed errors and capped reconnect back-off.
+- :mod:`.driver`: :class:`PolishingLink`, heartbeat, command handshake, self-check, re-arm.
+"""
+
+from wavestack.drivers.plc.codec import (
+    WORD_ORDERS,
+    WordOrder,
+    decode_float32,
+    decode_float32_array,
+    decode_uint32,
+    encode_float32,
+    encode_float32_array,
+    encode_uint32,
+    round_to_float32,
+)
+from wavestack.drivers.plc.driver import HeartbeatEchoStale, PolishingLink
+from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused
+from wavestack.drivers.plc.status import CommandAck, MachineOutputs, PlcStatus, StatusBit
+from wavestack.drivers.plc.transport import LinkTiming, PlcRefused
+
+__all__ = [
+    "WORD_ORDERS",
+    "CommandAck",
+    "HeartbeatEchoStale",
+    "LinkTiming",
+    "MachineOutputs",
+    "PlcRefused",
+    "PlcStatus",
+    "PolishingLink",
+    "RegisterBlock",
+    "RegisterMap",
+    "StatusBit",
+    "WordOrder",
+    "WriteRefused",
+    "decode_float32",
+    "decode_float32_array",
+    "decode_uint32",
+    "encode_float32",
+    "encode_float32_array",
+    "encode_uint32",
+    "round_to_float32",
+]

@@ -1,0 +1,365 @@
+"""The polishing-station link: a Modbus/TCP client (pymodbus 3.16, sync) behind a small typed API.
+
+:class:`PolishingLink` owns one :class:`~wavestack.drivers.plc.transport.ModbusTransport` (a
+pymodbus ``ModbusTcpClient``) and adds what a closed loop needs from a PLC link:
+
+- a heartbeat the host increments every cycle, with a check that the PLC logic echoes it;
+- a command id / acknowledge handshake: a removal command takes effect once, when the PLC sees its
+  id change; the PLC reports the last accepted id; resending the same id is harmless, so a command
+  whose reply was lost is simply sent again;
+- a start-up self-check of the float32 byte order that fails closed;
+- a write allow-list (:meth:`RegisterMap.check_write`) enforced before anything reaches the wire;
+- typed errors from :mod:`wavestack.drivers.errors`, each naming the unit id, register and function
+  code: :class:`DeviceTimeout` (no reply), :class:`DeviceDisconnected` (connection refused, reset or
+  closed), :class:`ProtocolError` (truncated or malformed reply) and its subclass
+  :class:`PlcRefused` (a Modbus exception reply);
+- after a timeout or a malformed reply the TCP connection is closed (no stale bytes can poison the
+  next reply); after any loss the link reconnects on the next call with capped exponential
+  back-off, and the first request on a new connection is the heartbeat.
+
+Every public call takes ``timeout_s`` and never blocks longer. The class is thread-safe (one lock
+around each call), so a station may run :meth:`heartbeat` from its own thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Sequence
+from types import TracebackType
+
+from numpy.typing import ArrayLike
+
+from wavestack.drivers.errors import DeviceTimeout, ProtocolError
+from wavestack.drivers.plc.codec import WORD_ORDERS, decode_float32, round_to_float32
+from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, registers_fit
+from wavestack.drivers.plc.status import (
+    CommandAck,
+    MachineOutputs,
+    PlcStatus,
+    decode_outputs,
+    decode_status,
+    tripped_status,
+)
+from wavestack.drivers.plc.transport import LinkTiming, ModbusTransport, PlcRefused, deadline_after
+
+__all__ = ["HeartbeatEchoStale", "LinkTiming", "PlcRefused", "PolishingLink"]
+
+_log = logging.getLogger(__name__)
+
+_WATCHDOG_EXCEPTION = 4
+
+
+class HeartbeatEchoStale(ProtocolError):
+    """The PLC answers but its logic no longer echoes the heartbeat (stopped or frozen program)."""
+
+
+class PolishingLink:
+    """Modbus/TCP link to the polishing-station PLC.
+
+    Parameters
+    ----------
+    host, port
+        Where the PLC (or its simulator) listens.
+    register_map
+        Addresses, function codes and byte orders (from the configuration).
+    timing
+        Timeouts, back-off and retry policy.
+
+    Notes
+    -----
+    Typical use by a station::
+
+        with PolishingLink(host, port, register_map) as link:
+            link.connect(timeout_s=5.0)
+            link.self_check(timeout_s=1.0)          # fails closed on a wrong byte order
+            while running:
+                status = link.heartbeat(timeout_s=0.5)   # once per cycle
+                if have_new_measurement and status.can_accept_command:
+                    link.send_removal(next_id, removal_nm, passes=1, timeout_s=2.0)
+    """
+
+    def __init__(self, host: str, port: int, register_map: RegisterMap, timing: LinkTiming | None = None) -> None:
+        if not 0 < port <= 65535:
+            raise ValueError(f"port must be 1..65535, got {port}")
+        self._map = register_map
+        self._timing = timing or LinkTiming()
+        self._device = f"PLC unit {register_map.unit_id} at {host}:{port}"
+        self._lock = threading.RLock()
+        self._transport = ModbusTransport(host, port, register_map.unit_id, self._device, self._timing,
+                                          on_connect=self._resume_heartbeat)
+        self._beat = 0
+        self._heartbeat_pending = True
+        self._self_check_passed = False
+        self._sent_commands: dict[int, tuple[int, ...]] = {}
+
+    # ----------------------------------------------------------------------------- public API
+    @property
+    def device(self) -> str:
+        """How errors name this PLC: ``"PLC unit 1 at 127.0.0.1:5020"``."""
+        return self._device
+
+    @property
+    def register_map(self) -> RegisterMap:
+        """The register map in use."""
+        return self._map
+
+    @property
+    def connected(self) -> bool:
+        """Whether a TCP connection is open now."""
+        return self._transport.connected
+
+    @property
+    def reconnects(self) -> int:
+        """Connections opened after the first one (after losses, timeouts or malformed replies)."""
+        return self._transport.reconnects
+
+    def connect(self, timeout_s: float) -> PlcStatus:
+        """Open the connection (retrying with back-off until ``timeout_s``), send a heartbeat, read status.
+
+        Raises
+        ------
+        DeviceDisconnected
+            No connection within ``timeout_s``.
+        """
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            self._transport.reset_backoff()
+            self._transport.ensure_connected(deadline)
+            return self._read_status(deadline)
+
+    def self_check(self, timeout_s: float) -> float:
+        """Read the known float32 constant and check it decodes with the configured byte order.
+
+        Returns
+        -------
+        float
+            The decoded constant.
+
+        Raises
+        ------
+        ProtocolError
+            The constant decodes to something else; the message names the configured word order and
+            the order that would decode it. The link then refuses commands (fails closed).
+        """
+        deadline = deadline_after(timeout_s)
+        block = self._map.self_check
+        with self._lock:
+            self._self_check_passed = False
+            registers = self._read_block(block, deadline)
+            assert block.word_order is not None
+            value = decode_float32(registers, block.word_order)
+            expected = round_to_float32(self._map.self_check_value)
+            if value != expected:
+                matching = [o for o in WORD_ORDERS if decode_float32(registers, o) == expected]
+                hint = (f"it decodes correctly with word order {matching[0]}" if matching else
+                        "no byte order decodes it: check the register address and the constant")
+                raise ProtocolError(self._device, f"start-up self-check failed: registers {block.start}-"
+                                    f"{block.stop - 1} = {registers} decode to {value!r} with the configured "
+                                    f"word order {block.word_order}, expected {expected!r}; {hint}. "
+                                    "Commands are refused until the self-check passes.")
+            self._self_check_passed = True
+            _log.info("%s: self-check passed (%r with word order %s)", self._device, value, block.word_order)
+            return value
+
+    def heartbeat(self, timeout_s: float) -> PlcStatus:
+        """Increment the heartbeat register, then read the status and check the PLC echoes it.
+
+        Call once per cycle, more often than the PLC's watchdog timeout.
+
+        Raises
+        ------
+        PlcRefused
+            Exception 4 when the watchdog has tripped (see :meth:`rearm`).
+        HeartbeatEchoStale
+            The echo trails the heartbeat by more than ``timing.heartbeat_echo_max_lag`` beats.
+        """
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            was_open = self._transport.ensure_connected(deadline)  # a new connection already beat once
+            if was_open or self._heartbeat_pending:
+                self._send_heartbeat(deadline)
+            status = self._read_status(deadline)
+            lag = (self._beat - (status.heartbeat_echo or 0)) & 0xFFFF
+            if not status.watchdog_tripped and lag > self._timing.heartbeat_echo_max_lag:
+                raise HeartbeatEchoStale(self._device, f"heartbeat echo (register {self._map.status.start + 2}) "
+                                         f"is {status.heartbeat_echo} while the host sent {self._beat}: "
+                                         f"{lag} beats behind, expected at most "
+                                         f"{self._timing.heartbeat_echo_max_lag}; the PLC program is not scanning")
+            return status
+
+    def send_removal(self, command_id: int, removal_nm: ArrayLike, passes: int, timeout_s: float) -> CommandAck:
+        """Send one removal command and wait for the PLC to acknowledge its id.
+
+        Parameters
+        ----------
+        command_id
+            1..65535, new for every command; resending an id (a retry) never applies it twice.
+        removal_nm
+            Removal per term in nm, shape (n_terms,), already through the safety stage.
+        passes
+            Polishing passes, >= 1.
+        timeout_s
+            Budget for the whole exchange, retries included.
+
+        Returns
+        -------
+        CommandAck
+            The id, the number of sends it took and the confirming status.
+
+        Raises
+        ------
+        ValueError
+            Bad arguments, or an id already sent with different parameters (nothing sent).
+        ProtocolError
+            The self-check has not passed, or the PLC did not acknowledge the id.
+        PlcRefused
+            The PLC refused the command (3: a parameter out of range; 4: watchdog/e-stop; 6: busy).
+        DeviceTimeout, DeviceDisconnected
+            After the retries, or at once on a connection loss.
+        """
+        registers = tuple(self._map.encode_command(command_id, passes, removal_nm))
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            previous = self._sent_commands.get(command_id)
+            if previous is not None and previous != registers:
+                raise ValueError(f"{self._device}: command id {command_id} was already sent with other "
+                                 "parameters; the PLC would ignore it (use a new id)")
+            if not self._self_check_passed:
+                raise ProtocolError(self._device, "refusing to send a command: the start-up self-check has not "
+                                    "passed (call self_check first)")
+            self._sent_commands = {command_id: registers}  # only the latest id matters for retries
+            attempts = 0
+            while True:
+                attempts += 1
+                try:
+                    self._transport.ensure_connected(deadline)
+                    if self._heartbeat_pending:
+                        self._send_heartbeat(deadline)  # heartbeat resumes before any command
+                    self._write(self._map.command.start, list(registers), self._map.command.write_function or 16,
+                                deadline)
+                    break
+                except PlcRefused:
+                    self._sent_commands = {}  # refused, never accepted: the id may be reused
+                    raise
+                except (DeviceTimeout, ProtocolError) as error:
+                    if attempts > self._timing.command_retries or time.monotonic() >= deadline:
+                        raise
+                    _log.warning("%s: command %d, attempt %d failed (%s); resending the same id",
+                                 self._device, command_id, attempts, error.detail)
+            status = self._read_status(deadline)
+            if status.last_accepted_id != command_id:
+                raise ProtocolError(self._device, f"command {command_id} was written but the PLC reports last "
+                                    f"accepted id {status.last_accepted_id} (register {self._map.status.start + 1})")
+            return CommandAck(command_id=command_id, attempts=attempts, status=status)
+
+    def read_status(self, timeout_s: float) -> PlcStatus:
+        """The status block; a tripped watchdog (exception 4) is reported as ``watchdog_tripped``."""
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            self._transport.ensure_connected(deadline)
+            return self._read_status(deadline)
+
+    def read_outputs(self, timeout_s: float) -> MachineOutputs:
+        """The machine outputs (read-only block the watchdog zeroes).
+
+        Raises
+        ------
+        PlcRefused
+            Exception 4 while the watchdog is tripped (the PLC answers nothing but the re-arm).
+        """
+        deadline = deadline_after(timeout_s)
+        block = self._map.output
+        with self._lock:
+            registers = self._read_block(block, deadline)
+            assert block.word_order is not None
+            return decode_outputs(registers, block.word_order)
+
+    def rearm(self, timeout_s: float) -> PlcStatus:
+        """Write 1 to the re-arm register, resume the heartbeat and return the status."""
+        deadline = deadline_after(timeout_s)
+        block = self._map.rearm
+        with self._lock:
+            self._transport.ensure_connected(deadline)
+            self._write(block.start, [1], block.write_function or 6, deadline)
+            _log.warning("%s: watchdog re-armed by the host", self._device)
+            self._send_heartbeat(deadline)
+            return self._read_status(deadline)
+
+    def read_registers(self, address: int, count: int, timeout_s: float) -> list[int]:
+        """Raw read of ``count`` registers with the configured read function code (diagnostics)."""
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            self._transport.ensure_connected(deadline)
+            return self._transport.read(address, count, self._map.status.read_function, deadline)
+
+    def write_registers(self, address: int, values: Sequence[int], timeout_s: float) -> None:
+        """Raw write, allowed only inside the heartbeat, re-arm or command block (commissioning).
+
+        Raises
+        ------
+        WriteRefused
+            Outside the allow-list, refused before anything is sent.
+        """
+        values = list(values)
+        if not values or not registers_fit(values):
+            raise ValueError(f"{self._device}: values must be 1..123 integers 0..65535, got {values!r}")
+        block = self._map.check_write(address, len(values), self._write_function_for(address))
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            self._transport.ensure_connected(deadline)
+            self._write(address, values, block.write_function or 16, deadline)
+
+    def close(self) -> None:
+        """Close the connection; idempotent. A later call reconnects."""
+        with self._lock:
+            self._transport.close()
+            self._heartbeat_pending = True
+
+    def __enter__(self) -> PolishingLink:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------------------- internals
+    def _write_function_for(self, address: int) -> int:
+        for block in self._map.blocks():
+            if block.writable and block.contains(address):
+                return block.write_function or 16
+        return 16
+
+    def _resume_heartbeat(self, deadline: float) -> None:
+        """First requests on a new connection: continue from the PLC's heartbeat register and beat."""
+        self._heartbeat_pending = True
+        block = self._map.heartbeat
+        try:
+            self._beat = self._transport.read(block.start, 1, block.read_function, deadline)[0]
+            self._send_heartbeat(deadline)
+        except PlcRefused as error:  # a tripped watchdog refuses everything but the re-arm
+            _log.warning("%s: heartbeat not resumed after connecting: %s", self._device, error.detail)
+
+    def _send_heartbeat(self, deadline: float) -> None:
+        block = self._map.heartbeat
+        beat = (self._beat + 1) & 0xFFFF
+        self._write(block.start, [beat], block.write_function or 6, deadline)
+        self._beat = beat
+        self._heartbeat_pending = False
+
+    def _read_status(self, deadline: float) -> PlcStatus:
+        try:
+            return decode_status(self._read_block(self._map.status, deadline))
+        except PlcRefused as error:
+            if error.exception_code == _WATCHDOG_EXCEPTION:
+                return tripped_status()
+            raise
+
+    def _read_block(self, block: RegisterBlock, deadline: float) -> list[int]:
+        self._transport.ensure_connected(deadline)
+        return self._transport.read(block.start, block.count, block.read_function, deadline)
+
+    def _write(self, address: int, values: list[int], function_code: int, deadline: float) -> None:
+        self._map.check_write(address, len(values), function_code)  # the allow-list, before the wire
+        self._transport.write(address, values, function_code, deadline)

@@ -1,0 +1,310 @@
+"""The safety stage every actuator output passes: drive limits, rate limit, invalid-input action.
+
+A closed loop (measured surface -> fit -> removal or voltage command) must never send a value the
+hardware should not see, whatever the fit, the network or the clock did. :class:`SafetyStage` sits
+between the loop and every driver; it is a pure object (no I/O, no clock of its own: the caller
+passes the times in), so every rule is testable without a wire. Its configuration,
+:class:`SafetyLimits`, is validated in :mod:`wavestack.drivers.safety_limits` and re-exported here.
+
+It follows the processing of the EPICS analog output (ao) record [1]_, per channel:
+
+1. *Invalid output action* (ao fields ``IVOA``/``IVOV``, menu ``menuIvoa`` [2]_): if the request
+   is invalid (flagged invalid by the caller, missing, non-finite anywhere, or stale), it is not
+   forwarded. ``invalid_action="hold"`` is EPICS's "Don't drive outputs" (the last output stays);
+   ``"safe_value"`` is "Set output to IVOV", except that the move toward ``safe_value`` is itself
+   rate limited (EPICS writes IVOV at once; a mirror or a polishing head must not jump).
+2. *Drive limits* (``DRVL``/``DRVH``): the request is clipped to ``[lower, upper]`` inclusive.
+3. *Limit rate of change* (``OROC``): the output differs from the previous output by at most
+   ``max_step`` per update. Unlike ``OROC = 0`` in EPICS, the rate limit cannot be switched off.
+
+The stage additionally guarantees what EPICS leaves to floating point: every output lies in
+``[lower, upper]`` and every step is ``<= max_step`` when both are evaluated in float64, whatever
+the inputs were (a last-ulp overshoot of ``last + step`` is pulled back toward the last output).
+
+References
+----------
+.. [1] EPICS Base Record Reference, "Analog Output Record (ao)": sections "Drive Limits" and
+   "Limit Rate of Change" (fields DRVH, DRVL, OROC, OVAL), and the alarm parameters IVOA, IVOV.
+   https://docs.epics-controls.org/projects/base/en/latest/aoRecord.html
+.. [2] EPICS Base Record Reference, "Menu menuIvoa": "Continue normally", "Don't drive outputs",
+   "Set output to IVOV".
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from wavestack.drivers.safety_limits import InvalidAction as InvalidAction  # re-exported
+from wavestack.drivers.safety_limits import SafetyLimits
+
+__all__ = ["SafeOutput", "SafetyLimits", "SafetyStage", "SafetyStatus"]
+
+_log = logging.getLogger(__name__)
+
+# A last-ulp overshoot needs at most a couple of nextafter nudges; the bound keeps the loop finite.
+_MAX_NUDGES = 8
+
+
+class SafetyStatus(enum.Flag):
+    """What the safety stage did to one request (flags combine, e.g. ``STALE | HELD``).
+
+    ``OK``: forwarded unchanged. ``CLIPPED``: clipped to the drive limits. ``RATE_LIMITED``: the
+    change from the last output was cut to ``max_step`` on some channel. ``NON_FINITE``: NaN or inf
+    in the request. ``STALE``: the measurement behind the request is too old (or from the future).
+    ``INVALID``: the caller marked the request invalid or gave none. ``HELD``: the request was not
+    forwarded; the output held still (``"hold"``) or moved toward ``safe_value``.
+    """
+
+    OK = 0
+    CLIPPED = enum.auto()
+    RATE_LIMITED = enum.auto()
+    NON_FINITE = enum.auto()
+    STALE = enum.auto()
+    INVALID = enum.auto()
+    HELD = enum.auto()
+
+
+@dataclass(frozen=True, eq=False)
+class SafeOutput:
+    """The value the stage lets through for one update.
+
+    Attributes
+    ----------
+    values
+        Output to send, shape (n,), read-only; always within the limits.
+    status
+        :class:`SafetyStatus` flags; ``SafetyStatus.OK`` when the request passed unchanged.
+    reason
+        Human-readable explanation when ``status`` is not OK, else None.
+    requested
+        Read-only copy of the request as given, shape (n,), or None if there was none.
+    """
+
+    values: NDArray[np.float64]
+    status: SafetyStatus
+    reason: str | None
+    requested: NDArray[np.float64] | None
+
+    @property
+    def forwarded(self) -> bool:
+        """True if the request (possibly clipped or rate limited) was acted on, False if held."""
+        return SafetyStatus.HELD not in self.status
+
+
+def _channels(mask: NDArray[np.bool_]) -> list[int]:
+    return np.flatnonzero(mask).tolist()
+
+
+class SafetyStage:
+    """Stateful filter between a closed loop and one actuator (see the module docstring).
+
+    Parameters
+    ----------
+    limits
+        The channel limits; the initial output is ``limits.safe_value``.
+
+    Notes
+    -----
+    Not thread-safe: one owner (the station's loop) calls :meth:`update`.
+    """
+
+    def __init__(self, limits: SafetyLimits) -> None:
+        self._limits = limits
+        self._last = limits.safe_value.copy()
+        self._holding = False
+
+    @property
+    def limits(self) -> SafetyLimits:
+        """The limits this stage enforces."""
+        return self._limits
+
+    @property
+    def last_output(self) -> NDArray[np.float64]:
+        """Copy of the last output, shape (n,) (``safe_value`` before the first update)."""
+        return self._last.copy()
+
+    def reset(self, values: ArrayLike) -> None:
+        """Set the last output, e.g. to the actuator's read-back after a reconnect.
+
+        Parameters
+        ----------
+        values
+            Shape (n,), finite and within ``[lower, upper]``.
+
+        Raises
+        ------
+        ValueError
+            Wrong shape, non-finite or outside the limits; the last output is then unchanged.
+        """
+        arr = self._as_request(values, "values")
+        lim = self._limits
+        bad = ~np.isfinite(arr) | (arr < lim.lower) | (arr > lim.upper)
+        if bad.any():
+            raise ValueError(
+                f"SafetyStage.reset: values must be finite and within [lower, upper]; channels "
+                f"{_channels(bad)} have {arr[bad].tolist()}"
+            )
+        self._last = arr
+        self._holding = False
+
+    def update(
+        self,
+        requested: ArrayLike | None,
+        *,
+        valid: bool = True,
+        measured_at_s: float,
+        now_s: float,
+        reason: str | None = None,
+    ) -> SafeOutput:
+        """Filter one request and return what may be sent to the actuator.
+
+        Parameters
+        ----------
+        requested
+            Requested output, shape (n,), actuator units; None when the loop has nothing (treated
+            as invalid).
+        valid
+            False when the loop knows the request is bad (failed fit, saturated frame, ...).
+        measured_at_s
+            Time of the measurement the request derives from, s, on the caller's clock.
+        now_s
+            Current time on the same clock, s.
+        reason
+            Why the caller marked the request invalid; quoted in the output's ``reason``.
+
+        Returns
+        -------
+        SafeOutput
+            Values within the limits, differing from the last output by at most ``max_step``.
+            Invalid input (not forwarded) keeps the last output under ``"hold"``.
+
+        Raises
+        ------
+        ValueError
+            ``requested`` is not shape (n,) (a programming error); nothing changes.
+        """
+        lim = self._limits
+        request = None if requested is None else self._as_request(requested, "requested")
+        request_copy = None
+        if request is not None:
+            request_copy = request.copy()
+            request_copy.setflags(write=False)
+        status = SafetyStatus.OK
+        reasons: list[str] = []
+
+        if request is None:
+            status |= SafetyStatus.INVALID
+            reasons.append("no request" + (f" ({reason})" if reason else ""))
+        else:
+            non_finite = ~np.isfinite(request)
+            if non_finite.any():
+                status |= SafetyStatus.NON_FINITE
+                reasons.append(f"non-finite request on channels {_channels(non_finite)}")
+            if not valid:
+                status |= SafetyStatus.INVALID
+                reasons.append("request marked invalid" + (f" ({reason})" if reason else ""))
+        stale_reason = self._staleness(measured_at_s, now_s)
+        if stale_reason is not None:
+            status |= SafetyStatus.STALE
+            reasons.append(stale_reason)
+
+        if status != SafetyStatus.OK:
+            status |= SafetyStatus.HELD
+            if lim.invalid_action == "safe_value":
+                values = self._step_toward(lim.safe_value)
+                if not np.array_equal(values, lim.safe_value):
+                    status |= SafetyStatus.RATE_LIMITED
+                reasons.append("moving toward safe_value")
+            else:
+                values = self._last.copy()
+                reasons.append("holding the last output")
+            if not self._holding:
+                _log.warning("safety stage stops forwarding: %s", "; ".join(reasons))
+            self._holding = True
+        else:
+            assert request is not None  # a missing request always sets INVALID above
+            clipped = np.clip(request, lim.lower, lim.upper)
+            was_clipped = clipped != request
+            if was_clipped.any():
+                status |= SafetyStatus.CLIPPED
+                reasons.append(f"clipped to the drive limits on channels {_channels(was_clipped)}")
+            values = self._step_toward(clipped)
+            was_limited = values != clipped
+            if was_limited.any():
+                status |= SafetyStatus.RATE_LIMITED
+                reasons.append(f"rate limited to max_step on channels {_channels(was_limited)}")
+            if self._holding:
+                _log.info("safety stage forwards requests again")
+            self._holding = False
+
+        self._last = values
+        out = values.copy()
+        out.setflags(write=False)
+        return SafeOutput(
+            values=out,
+            status=status,
+            reason="; ".join(reasons) if reasons else None,
+            requested=request_copy,
+        )
+
+    # ------------------------------------------------------------------------------- private
+    def _as_request(self, value: ArrayLike, name: str) -> NDArray[np.float64]:
+        n = self._limits.n_channels
+        try:
+            arr = np.array(value, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"SafetyStage: {name} must be {n} numbers, got {value!r}") from exc
+        if arr.shape != (n,):
+            raise ValueError(f"SafetyStage: {name} must have shape ({n},), got {arr.shape}")
+        return arr
+
+    def _staleness(self, measured_at_s: float, now_s: float) -> str | None:
+        """Why the measurement time makes the request stale, or None if it is fresh."""
+        try:
+            measured, now = float(measured_at_s), float(now_s)
+        except (TypeError, ValueError):
+            return f"timestamps not numbers (measured_at_s={measured_at_s!r}, now_s={now_s!r})"
+        if not (math.isfinite(measured) and math.isfinite(now)):
+            return f"timestamps not finite (measured_at_s={measured}, now_s={now})"
+        age = now - measured
+        if age > self._limits.max_age_s:
+            return f"input stale: measured {age:.3g} s ago, max_age_s={self._limits.max_age_s:g}"
+        if -age > self._limits.max_future_s:
+            return (
+                f"input time-stamped {-age:.3g} s in the future "
+                f"(clock skew tolerance max_future_s={self._limits.max_future_s:g})"
+            )
+        return None
+
+    def _step_toward(self, target: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Move from the last output toward ``target`` (within limits) by at most ``max_step``.
+
+        ``target`` must lie in ``[lower, upper]``. Exact in float64: the result lies in
+        ``[lower, upper]``, equals ``target`` when ``|target - last| <= max_step``, and
+        ``|result - last| <= max_step`` as evaluated in float64 (a rounding overshoot is nudged
+        back toward ``last`` one ulp at a time; ``last`` itself satisfies both bounds, so the
+        nudging terminates).
+        """
+        lim, last = self._limits, self._last
+        with np.errstate(over="ignore", invalid="ignore"):
+            gap = target - last
+        # within one step: take the target itself (last + gap can round away from it)
+        values = np.where(
+            np.abs(gap) <= lim.max_step,
+            target,
+            np.clip(last + np.clip(gap, -lim.max_step, lim.max_step), lim.lower, lim.upper),
+        )
+        for _ in range(_MAX_NUDGES):
+            over = np.abs(values - last) > lim.max_step
+            if not over.any():
+                return values
+            values = np.where(over, np.nextafter(values, last), values)
+        # Unreachable for finite limits (one or two ulps at most); never emit an unchecked value.
+        over = np.abs(values - last) > lim.max_step
+        return np.where(over, last, values)

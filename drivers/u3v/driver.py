@@ -1,0 +1,399 @@
+"""USB3 Vision camera over pyusb: control (GenCP), bootstrap, GenICam features and the stream.
+
+:class:`U3VCamera` *has* a ``usb.core.Device``. The control channel
+(:class:`~wavestack.drivers.u3v.control.ControlChannel`) serialises every command / acknowledge
+exchange with a lock, so the user's thread and the stream thread never interleave on the control
+endpoints. Finding and claiming the device is in :mod:`~wavestack.drivers.u3v.connection`. One
+reader thread (:class:`~wavestack.drivers.u3v.acquisition.StreamReader`) assembles stream blocks
+into :class:`Frame` values and puts them into a bounded :class:`FrameRing`; trouble on the stream
+(timeouts, stalls, corrupt blocks) is counted and survived, an unplug closes the ring with one
+``DeviceDisconnected``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+import threading
+import time
+from types import TracebackType
+from typing import Any
+
+import usb.core
+import usb.util
+
+from wavestack.drivers.errors import DeviceDisconnected, DeviceError, LimitError, ProtocolError
+from wavestack.drivers.frames import Frame
+from wavestack.drivers.ring import FrameRing, RingPolicy
+from wavestack.drivers.u3v import bootstrap as bs
+from wavestack.drivers.u3v.acquisition import StreamReader, U3VCounters, enable_stream
+from wavestack.drivers.u3v.connection import (CONTROL_PROTOCOL, STREAM_PROTOCOL, U3V_CLASS, U3V_SUBCLASS, Link,
+                                              attach, find_device, release)
+from wavestack.drivers.u3v.feature_io import read_feature, write_feature
+from wavestack.drivers.u3v.genicam import Feature, FeatureMap
+from wavestack.drivers.u3v.stream import BlockAssembler, pixel_format_code
+
+__all__ = ["CONTROL_PROTOCOL", "STREAM_PROTOCOL", "U3V_CLASS", "U3V_SUBCLASS", "U3VCamera", "U3VCounters"]
+
+logger = logging.getLogger(__name__)
+
+
+def _check_timeout(timeout_s: float) -> None:
+    if not (math.isfinite(timeout_s) and timeout_s > 0):
+        raise ValueError(f"timeout_s must be a finite number > 0, got {timeout_s}")
+
+
+class U3VCamera:
+    """A USB3 Vision camera (GenCP control + one image stream) driven through pyusb.
+
+    Build it with :meth:`open`. Reading properties and setting features talk to the device; frames
+    arrive through :meth:`start` / :meth:`read_frame` / :meth:`stop`. Use as a context manager or call
+    :meth:`close`.
+    """
+
+    def __init__(self, *, backend: Any, serial: str | None, timeout_s: float, ring_capacity: int,
+                 ring_policy: RingPolicy) -> None:
+        _check_timeout(timeout_s)
+        self._backend = backend
+        self._serial = serial
+        self._timeout_s = timeout_s
+        self._name = f"U3V camera{' ' + serial if serial else ''}"
+        self._ring_capacity = ring_capacity
+        self._ring_policy = RingPolicy(ring_policy)
+        self._ring: FrameRing[Frame] = FrameRing(ring_capacity, self._ring_policy, name=self._name)
+        self._state_lock = threading.Lock()
+        self._stats = {"discarded_blocks": 0, "stalls_cleared": 0, "stream_timeouts": 0, "transfer_errors": 0}
+        self._link: Link | None = None
+        self._disconnected: DeviceDisconnected | None = None
+        self._closed = False
+        self._acquiring = False
+        self._reader: StreamReader | None = None
+
+    # ----------------------------------------------------------------------------------- opening
+    @classmethod
+    def open(cls, *, backend: Any = None, serial: str | None = None, timeout_s: float, ring_capacity: int = 4,
+             ring_policy: RingPolicy = RingPolicy.NEWEST_ONLY) -> U3VCamera:
+        """Find a USB3 Vision camera, claim it and read its bootstrap registers and GenICam XML.
+
+        Parameters
+        ----------
+        backend
+            pyusb backend (``None``: libusb; tests pass the simulator's backend).
+        serial
+            USB serial number string to pick one camera; ``None`` takes the first found.
+        timeout_s
+            Longest time for the whole opening sequence, s; also the default for property reads
+            and :meth:`stop`.
+        ring_capacity, ring_policy
+            The frame ring between the stream thread and :meth:`read_frame`.
+
+        Raises
+        ------
+        ValueError
+            Bad timeout or ring capacity (before any I/O).
+        DeviceDisconnected
+            No matching camera is plugged in.
+        DeviceTimeout, ProtocolError
+            The camera did not answer in time or answered outside the protocol.
+        """
+        camera = cls(backend=backend, serial=serial, timeout_s=timeout_s, ring_capacity=ring_capacity,
+                     ring_policy=ring_policy)
+        dev = find_device(backend, serial)
+        if dev is None:
+            raise DeviceDisconnected(camera._name, "expected a USB3 Vision device (interface class 0xEF/0x05) "
+                                                   f"{'with serial ' + repr(serial) if serial else ''} to be "
+                                                   "plugged in, found none")
+        camera._connect(dev, time.monotonic() + timeout_s)
+        return camera
+
+    def _connect(self, dev: usb.core.Device, deadline: float) -> None:
+        ids = f"{dev.idVendor:04x}:{dev.idProduct:04x}"
+        self._name = f"U3V camera {ids}{' SN ' + self._serial if self._serial else ''}"
+        try:
+            link = attach(dev, deadline, self._name, self._mark_disconnected)
+        except BaseException:
+            usb.util.dispose_resources(dev)
+            raise
+        abrm = link.abrm
+        self._serial = self._serial or abrm.serial_number or None
+        self._name = f"U3V camera {ids} {abrm.model} SN {abrm.serial_number}"
+        link.control.name = self._name
+        self._link = link
+        self._ring = FrameRing(self._ring_capacity, self._ring_policy, name=self._name)
+        self._disconnected = None
+        logger.info("%s: opened (GenCP %d.%d, max response %d ms)", self._name, *abrm.gencp_version,
+                    abrm.max_response_time_ms)
+
+    def _mark_disconnected(self, error: DeviceDisconnected) -> None:
+        with self._state_lock:
+            if self._disconnected is None:
+                self._disconnected = error
+        self._ring.close(error)
+
+    def _live(self) -> Link:
+        if self._closed:
+            raise DeviceDisconnected(self._name, "camera was closed; open it again")
+        if self._disconnected is not None:
+            raise DeviceDisconnected(self._name, "device was unplugged; replug it and call reopen()")
+        if self._link is None:
+            raise DeviceDisconnected(self._name, "not connected")
+        return self._link
+
+    # ---------------------------------------------------------------------------------- features
+    def _deadline(self, timeout_s: float | None) -> float:
+        timeout = self._timeout_s if timeout_s is None else timeout_s
+        _check_timeout(timeout)
+        return time.monotonic() + timeout
+
+    def _read_feature(self, name: str, deadline: float) -> int | float:
+        link = self._live()
+        return read_feature(link.control, link.features.require(name, self._name), deadline, self._name)
+
+    def _write_feature(self, feature: Feature, value: int | float, deadline: float) -> None:
+        write_feature(self._live().control, feature, value, deadline, self._name)
+
+    def _feature(self, name: str) -> Feature:
+        return self._live().features.require(name, self._name)
+
+    @property
+    def name(self) -> str:
+        """Device name used in messages (vendor:product, model, serial)."""
+        return self._name
+
+    @property
+    def features(self) -> FeatureMap:
+        """The features resolved from the device's GenICam XML."""
+        return self._live().features
+
+    @property
+    def device_info(self) -> bs.Abrm:
+        """Identification and timing read from the ABRM at open."""
+        return self._live().abrm
+
+    @property
+    def width(self) -> int:
+        """Image width, pixels (read from the device)."""
+        return int(self._read_feature("Width", self._deadline(None)))
+
+    @property
+    def height(self) -> int:
+        """Image height, pixels (read from the device)."""
+        return int(self._read_feature("Height", self._deadline(None)))
+
+    @property
+    def pixel_format(self) -> str:
+        """Pixel format name from the XML's enumeration (``"Mono8"``, ``"Mono12"``, ...), read from the device."""
+        value = int(self._read_feature("PixelFormat", self._deadline(None)))
+        name = self._feature("PixelFormat").entry_name(value)
+        if name is None:
+            raise ProtocolError(self._name, f"PixelFormat register holds 0x{value:08X}, not an entry of the XML")
+        return name
+
+    @property
+    def exposure_us(self) -> float:
+        """Exposure time, µs (read from the device)."""
+        return float(self._read_feature("ExposureTime", self._deadline(None)))
+
+    def set_exposure_us(self, exposure_us: float, timeout_s: float) -> None:
+        """Set the exposure time.
+
+        Parameters
+        ----------
+        exposure_us
+            Exposure, µs; finite and > 0.
+        timeout_s
+            Longest wait for the acknowledge, s.
+
+        Raises
+        ------
+        ValueError
+            Not finite or <= 0 (nothing sent).
+        LimitError
+            Outside the XML's Min/Max (nothing sent).
+        """
+        if not (math.isfinite(exposure_us) and exposure_us > 0):
+            raise ValueError(f"exposure_us must be finite and > 0, got {exposure_us}")
+        deadline = self._deadline(timeout_s)
+        feature = self._feature("ExposureTime")
+        low, high = feature.minimum, feature.maximum
+        if (low is not None and exposure_us < low) or (high is not None and exposure_us > high):
+            raise LimitError(self._name, f"ExposureTime {exposure_us} µs outside the device's {low}..{high} µs")
+        self._write_feature(feature, exposure_us, deadline)
+
+    def set_pixel_format(self, name: str, timeout_s: float) -> None:
+        """Select ``"Mono8"``, ``"Mono12"`` or ``"Mono16"``; only while not acquiring.
+
+        Raises
+        ------
+        ValueError
+            Unsupported name, or acquisition is running (nothing sent).
+        LimitError
+            The device's XML does not offer this format (nothing sent).
+        """
+        pixel_format_code(name)  # ValueError for names the stream decoder does not know
+        if self._acquiring:
+            raise ValueError(f"{self._name}: stop acquisition before changing the pixel format")
+        deadline = self._deadline(timeout_s)
+        feature = self._feature("PixelFormat")
+        if name not in feature.entries:
+            raise LimitError(self._name, f"PixelFormat {name!r} not offered; device has {sorted(feature.entries)}")
+        self._write_feature(feature, feature.entries[name], deadline)
+
+    def set_trigger_mode(self, on: bool, timeout_s: float) -> None:
+        """Software-triggered (``True``: one frame per :meth:`trigger_software`) or free-run (``False``)."""
+        deadline = self._deadline(timeout_s)
+        feature = self._feature("TriggerMode")
+        entry = "On" if on else "Off"
+        if entry not in feature.entries:
+            raise ProtocolError(self._name, f"TriggerMode lacks entry {entry!r}; has {sorted(feature.entries)}")
+        self._write_feature(feature, feature.entries[entry], deadline)
+
+    def trigger_software(self, timeout_s: float) -> None:
+        """Execute TriggerSoftware (one frame when the trigger mode is on)."""
+        self._execute("TriggerSoftware", self._deadline(timeout_s))
+
+    def _execute(self, name: str, deadline: float) -> None:
+        feature = self._feature(name)
+        if feature.kind != "command" or feature.command_value is None:
+            raise ProtocolError(self._name, f"feature {name} is a {feature.kind}, expected a command")
+        self._write_feature(feature, feature.command_value, deadline)
+
+    # --------------------------------------------------------------------------------- streaming
+    def start(self, timeout_s: float | None = None) -> None:
+        """Configure the SIRM transfer sizes, enable the stream, AcquisitionStart, start the reader.
+
+        Frames pending from an earlier acquisition are dropped (counted). Idempotent while running.
+        """
+        deadline = self._deadline(timeout_s)
+        link = self._live()
+        if self._reader is not None:
+            return
+        sirm, sizes = enable_stream(link.control, link.sbrm.sirm_address, deadline, self._name)
+        if self._ring.closed:  # the last reader gave up after repeated stream errors: start afresh
+            self._ring = FrameRing(self._ring_capacity, self._ring_policy, name=self._name)
+        self._ring.discard_pending()
+        self._execute("AcquisitionStart", deadline)
+        self._acquiring = True
+        assembler = BlockAssembler(sizes, sirm.required_payload_size, self._name)
+        self._reader = StreamReader(link.dev, link.stream_ep, assembler, self._ring, self._name, self._count,
+                                    self._mark_disconnected, f"u3v-reader {self._serial or ''}".strip())
+        self._reader.start()
+        logger.info("%s: streaming, payload %d B in %d x %d B + %d + %d", self._name, sirm.required_payload_size,
+                    sizes.payload_count, sizes.payload_size, sizes.final1_size, sizes.final2_size)
+
+    def read_frame(self, timeout_s: float) -> Frame:
+        """The next frame by the ring's policy.
+
+        Raises
+        ------
+        DeviceTimeout
+            No frame within ``timeout_s`` (e.g. waiting for a trigger, or not started).
+        DeviceDisconnected
+            The camera was unplugged (after the pending frames are read) or closed.
+        """
+        return self._ring.get(timeout_s)
+
+    def counters(self) -> U3VCounters:
+        """Frame counters and stream health (see :class:`U3VCounters`)."""
+        ring = self._ring.counters()
+        with self._state_lock:
+            stats = dict(self._stats)
+        return U3VCounters(ring.acquired, ring.delivered, ring.dropped, ring.dropped_in_gaps, ring.pending, **stats)
+
+    def _count(self, key: str) -> None:
+        with self._state_lock:
+            self._stats[key] += 1
+
+    def _join_reader(self) -> None:
+        reader, self._reader = self._reader, None
+        if reader is not None:
+            reader.join()
+
+    def stop(self, timeout_s: float | None = None) -> None:
+        """AcquisitionStop, stop and join the reader thread, disable the stream. Idempotent.
+
+        After an unplug only the thread is joined. Pending frames stay readable.
+
+        Raises
+        ------
+        DeviceTimeout, ProtocolError
+            The device did not acknowledge AcquisitionStop or the stream disable (the thread is
+            joined regardless).
+        """
+        deadline = self._deadline(timeout_s)
+        if self._reader is None and not self._acquiring:
+            return
+        self._acquiring = False
+        failure: DeviceError | None = None
+        if self._disconnected is None and not self._closed and self._link is not None:
+            try:
+                self._execute("AcquisitionStop", deadline)
+            except DeviceError as exc:
+                failure = exc
+        self._join_reader()
+        if self._disconnected is None and not self._closed and self._link is not None:
+            try:
+                self._link.control.write(self._link.sbrm.sirm_address + bs.SIRM_SI_CONTROL, struct.pack("<I", 0),
+                                         deadline, "SIRM stream disable")
+            except DeviceError as exc:
+                failure = failure or exc
+        if failure is not None and not isinstance(failure, DeviceDisconnected):
+            raise failure
+
+    # ------------------------------------------------------------------------------ life cycle
+    def _release(self) -> None:
+        link, self._link = self._link, None
+        if link is not None:
+            release(link, self._name)
+
+    def close(self) -> None:
+        """Stop acquisition, join the reader, release the interfaces and USB resources. Idempotent."""
+        if self._closed:
+            return
+        try:
+            self.stop()
+        except DeviceError as exc:
+            logger.warning("%s: stopping while closing: %s", self._name, exc)
+        finally:
+            self._join_reader()
+            self._closed = True
+            self._ring.close(DeviceDisconnected(self._name, "camera closed"))
+            self._release()
+
+    def reopen(self, timeout_s: float) -> None:
+        """Reconnect after an unplug/replug: find the same camera (by serial), re-read its bootstrap.
+
+        Waits up to ``timeout_s`` for the camera to re-enumerate. A fresh frame ring replaces the
+        closed one (counters restart); if acquisition was running when the camera went away (and
+        :meth:`stop` was not called since), it is started again.
+
+        Raises
+        ------
+        DeviceDisconnected
+            The camera did not re-enumerate within ``timeout_s``, or the camera was closed.
+        DeviceTimeout, ProtocolError
+            As for :meth:`open`.
+        """
+        deadline = self._deadline(timeout_s)
+        if self._closed:
+            raise DeviceDisconnected(self._name, "camera was closed; open it again instead of reopen()")
+        resume = self._acquiring  # kept across failed attempts: a later reopen() still resumes
+        self._join_reader()
+        self._release()
+        self._ring.close(DeviceDisconnected(self._name, "connection replaced by reopen()"))
+        while (dev := find_device(self._backend, self._serial)) is None:
+            if time.monotonic() >= deadline:
+                raise DeviceDisconnected(self._name, f"expected the camera to re-enumerate within {timeout_s:g} s")
+            time.sleep(0.05)
+        self._connect(dev, deadline)
+        self._acquiring = False
+        if resume:
+            self.start(max(deadline - time.monotonic(), 0.001))
+
+    def __enter__(self) -> U3VCamera:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()

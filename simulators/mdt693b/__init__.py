@@ -1,0 +1,13 @@
+"""Simulated Thorlabs MDT693B / MDT694B piezo controller.
+
+``device`` is the controller's state machine (bytes in, bytes out, fault switches); ``pty_bridge``
+serves it on a pseudo-terminal. The ``sim://mdt693b`` serial URL (``simulators/protocol_sim.py``,
+enabled by ``register_serial_simulators()``) serves it to ``serial.serial_for_url`` without a thread.
+"""
+
+from __future__ import annotations
+
+from wavestack.simulators.mdt693b.device import MDT693BDevice, MDT693BFaults, MDT693BPersonality
+from wavestack.simulators.mdt693b.pty_bridge import PtyBridge
+
+__all__ = ["MDT693BDevice", "MDT693BFaults", "MDT693BPersonality", "PtyBridge"]

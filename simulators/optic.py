@@ -1,0 +1,382 @@
+"""The simulated test optic: a surface with known Zernike coefficients, seen as interferograms.
+
+A :class:`TestOptic` holds a wavefront ``W`` (waves) on an aperture of a ``height x width``
+camera and renders the interferograms a phase-shifting or carrier-fringe interferometer would
+record of it, returning with every frame the ground truth (:class:`OpticTruth`) a test compares
+the pipeline's answer with. The aperture (:mod:`~wavestack.simulators.aperture_shape`) and the
+settings (:mod:`~wavestack.simulators.optic_settings`) have modules of their own; their public
+names are re-exported here.
+
+Coordinates
+-----------
+Pixel ``(row, col)`` has its centre at the integer point ``(col, row)``. Aperture geometry
+(:class:`ApertureShape`) is given as ``(col, row)`` pairs in pixels (rows grow downward).
+Rotations are counter-clockwise as the image is displayed, i.e. from ``+col`` towards ``-row``.
+
+The unit disk (what the coefficients mean)
+------------------------------------------
+The coefficients are Noll-ordered (``j = 1, 2, ...``; :func:`~wavestack.pipeline.mode_list`
+``("noll", J)``), unit-RMS circle Zernike polynomials (Noll 1976) over the unit disk that
+circumscribes the aperture:
+
+* centre ``(cx, cy)`` (a column and a row) and radius ``R`` in pixels: the minimum enclosing
+  circle of the *centres of the valid pixels* of the rasterised mask, exactly
+  ``Aperture.from_mask(mask).enclosing_circle()`` -- the pupil ``build_fitter(mask)`` uses by
+  default. It is reported as ``OpticTruth.pupil_px`` and can be passed as
+  ``build_fitter(..., pupil=truth.pupil_px)`` when the fitted aperture is a detected one;
+* ``u = (col - cx) / R`` (right) and ``v = (cy - row) / R`` (up), and
+  ``W(col, row) = sum_j c_j Z_j(u, v)`` in waves of wavefront, with ``Z_j`` as
+  :func:`~wavestack.pipeline.zernike_basis` evaluates them ("rms" normalisation).
+
+The coefficients belong to the current aperture's disk: :meth:`TestOptic.set_aperture` puts the
+same coefficients on the new aperture's disk (as when another optic, or a pupil relayed at
+another size, is put in front of the camera), so the truth stays ``zernike_waves`` (plus drift).
+
+Intensity model
+---------------
+Inside the aperture (sign convention of :mod:`wavestack.pipeline.psi`, ``delta`` the phase
+shift)::
+
+    I = background + modulation * cos(2 pi W + carrier + delta + vibration)
+
+with ``carrier = 2 pi (nx * col / width - ny * row / height)`` for ``carrier_cycles = (nx, ny)``
+(x right, y up: the ``2 pi (fx x + fy y)`` of :mod:`wavestack.pipeline.carrier` with
+``fx = nx / width``, ``fy = ny / height``; with ``nx > 0`` ``carrier_phase(sign=+1)`` returns
+``+2 pi W``). Outside the aperture there are no fringes, only a dim uniform halo
+(``I = halo``). All levels are fractions of full scale ``2**bit_depth - 1``; Gaussian read
+noise of ``noise_rms`` is added, then the frame is rounded to the nearest count and clipped to
+``[0, full scale]`` (uint8 for 8 bits, uint16 otherwise).
+
+Speed. The wavefront is linear in time, ``W(t) = B (c + t d) = W0 + t D`` with ``B`` the basis
+on the aperture pixels, so the two products ``B c`` and ``B d`` are made once per aperture (the
+basis is evaluated in blocks and not kept) and a frame costs a few float32 passes: phase,
+``cos``, scale and offset, noise from a pre-drawn pool at a random offset, rounding.
+
+References
+----------
+.. [1] R. J. Noll, "Zernike polynomials and atmospheric turbulence", J. Opt. Soc. Am. 66,
+   207-211 (1976).
+.. [2] D. Malacara (ed.), Optical Shop Testing, 3rd ed., Wiley (2007), ch. 14 (phase-shifting
+   interferometry: ``I = a + b cos(phi + delta)``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wavestack.pipeline.aperture import Aperture
+from wavestack.pipeline.zernike import zernike_basis
+from wavestack.pipeline.zernike_index import mode_list
+from wavestack.simulators.aperture_shape import ApertureKind, ApertureShape, _finite
+from wavestack.simulators.optic_settings import BitDepth, OpticSettings
+
+__all__ = ["ApertureKind", "ApertureShape", "BitDepth", "OpticSettings", "OpticTruth", "TestOptic"]
+
+logger = logging.getLogger(__name__)
+
+_BASIS_BLOCK = 1 << 15  # aperture pixels per block when evaluating the basis
+_NOISE_POOL_EXTRA = 1 << 18  # spare noise samples: the random offset of a frame's noise slice
+
+
+def _readonly(array: NDArray) -> NDArray:
+    """Mark ``array`` read-only and return it (results are shared, never copied)."""
+    array.flags.writeable = False
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class OpticTruth:
+    """The ground truth behind one frame (or one instant, from :meth:`TestOptic.truth`).
+
+    Attributes
+    ----------
+    time_s : float
+        Time the frame shows, seconds.
+    modes : tuple of (int, int)
+        ``(n, m)`` of each coefficient, Noll order from ``j = 1``.
+    coefficients_waves : ndarray, shape (J,)
+        ``c(t)``, unit-RMS Zernike coefficients over the disk ``pupil_px``, waves (read-only).
+    pupil_px : (float, float, float)
+        The unit disk ``(cx, cy, R)``: centre column, centre row, radius, pixels (module notes).
+    wavefront_waves : ndarray, shape (height, width)
+        ``W`` in waves, NaN outside the aperture; no carrier, shift or vibration (read-only).
+    mask : ndarray of bool, shape (height, width)
+        The rasterised aperture (read-only).
+    aperture : ApertureShape
+        The aperture in force.
+    aperture_revision : int
+        0 for the initial aperture, +1 per :meth:`TestOptic.set_aperture`.
+    phase_shift_rad : float
+        The ``delta`` applied to the frame (0 for :meth:`TestOptic.truth`).
+    vibration_rad : float
+        The piston jitter applied to the frame (0 for :meth:`TestOptic.truth`).
+    carrier_cycles : (float, float)
+        The carrier ``(nx, ny)`` of the frame, fringes across width and height.
+    """
+
+    time_s: float
+    modes: tuple[tuple[int, int], ...]
+    coefficients_waves: NDArray[np.float64]
+    pupil_px: tuple[float, float, float]
+    wavefront_waves: NDArray[np.float64]
+    mask: NDArray[np.bool_]
+    aperture: ApertureShape
+    aperture_revision: int
+    phase_shift_rad: float = 0.0
+    vibration_rad: float = 0.0
+    carrier_cycles: tuple[float, float] = (0.0, 0.0)
+
+
+@dataclass(frozen=True, eq=False)
+class _Rendering:
+    """Everything precomputed for one aperture; replaced whole by ``set_aperture``."""
+
+    shape: ApertureShape
+    revision: int
+    mask: NDArray[np.bool_]
+    pupil: tuple[float, float, float]
+    wavefront: NDArray[np.float64]  # W0 = B c, NaN outside
+    wavefront_drift: NDArray[np.float64] | None  # D = B d, NaN outside
+    phase: NDArray[np.float32]  # 2 pi W0 + carrier modulo 2 pi, radians (finite everywhere)
+    phase_drift: NDArray[np.float32] | None  # 2 pi D, radians per second, 0 outside
+    amplitude: NDArray[np.float32]  # modulation counts inside, 0 outside
+    offset: NDArray[np.float32]  # background counts inside, halo counts outside
+
+
+class TestOptic:
+    """A test optic with a known, optionally drifting, wavefront, rendered as interferograms.
+
+    Parameters
+    ----------
+    settings : OpticSettings
+    height, width : int
+        Camera frame size, pixels (each ``>= 2``).
+
+    Raises
+    ------
+    ValueError
+        If the size is invalid or the aperture covers no pixel of the frame.
+
+    Notes
+    -----
+    Deterministic: two optics with the same settings, size and call sequence render identical
+    frames. Thread-safe: frames may be rendered from a camera thread while another thread
+    changes the aperture (a frame uses one aperture throughout).
+    """
+
+    __test__ = False  # a library class, not a pytest test class, despite its name
+
+    def __init__(self, settings: OpticSettings, height: int, width: int) -> None:
+        if not isinstance(settings, OpticSettings):
+            raise ValueError(f"settings: expected OpticSettings, got {type(settings).__name__}")
+        for name, value in (("height", height), ("width", width)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 2:
+                raise ValueError(f"{name}: expected an integer >= 2 pixels, got {value!r}")
+        self._settings = settings
+        self._size = (int(height), int(width))
+        self._modes = tuple(mode_list("noll", len(settings.zernike_waves)))
+        self._coefficients = np.asarray(settings.zernike_waves, dtype=np.float64)
+        self._drift = (np.asarray(settings.drift_waves_per_s, dtype=np.float64)
+                       if any(settings.drift_waves_per_s) else None)
+        self._lock = threading.Lock()  # guards the generator and the swap of the rendering
+        self._aperture_lock = threading.Lock()  # serialises aperture changes
+        self._rng = np.random.default_rng(settings.seed)
+        self._vibration_phase = float(self._rng.uniform(0.0, 2.0 * np.pi))
+        pixels = self._size[0] * self._size[1]
+        self._noise = None
+        if settings.noise_rms > 0:
+            pool = self._rng.standard_normal(pixels + _NOISE_POOL_EXTRA, dtype=np.float32)
+            pool *= np.float32(settings.noise_rms * settings.full_scale)
+            self._noise = _readonly(pool)
+        self._rendering = self._prepare(settings.aperture, revision=0)
+
+    # ----------------------------------------------------------------------------- properties
+
+    @property
+    def settings(self) -> OpticSettings:
+        """The settings the optic was built with (``aperture`` is the initial one)."""
+        return self._settings
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(height, width)`` of the frames, pixels."""
+        return self._size
+
+    @property
+    def modes(self) -> tuple[tuple[int, int], ...]:
+        """``(n, m)`` of the coefficients, Noll order from ``j = 1``."""
+        return self._modes
+
+    @property
+    def aperture(self) -> ApertureShape:
+        """The aperture in force."""
+        return self._rendering.shape
+
+    @property
+    def aperture_revision(self) -> int:
+        """0 for the initial aperture, +1 per :meth:`set_aperture`."""
+        return self._rendering.revision
+
+    @property
+    def pupil_px(self) -> tuple[float, float, float]:
+        """The unit disk ``(cx, cy, R)`` of the current aperture: column, row, radius, pixels."""
+        return self._rendering.pupil
+
+    @property
+    def mask(self) -> NDArray[np.bool_]:
+        """The rasterised current aperture, shape (height, width), read-only."""
+        return self._rendering.mask
+
+    def coefficients(self, time_s: float) -> NDArray[np.float64]:
+        """``c(t) = zernike_waves + t drift_waves_per_s``, shape (J,), waves."""
+        t = _finite(time_s, "time_s")
+        values = self._coefficients if self._drift is None else self._coefficients + t * self._drift
+        return _readonly(values.copy())
+
+    # ----------------------------------------------------------------------------- aperture
+
+    def set_aperture(self, shape: ApertureShape) -> None:
+        """Change the aperture mid-run; the next frame is rendered on the new one.
+
+        The basis products are recomputed on the new aperture and its own circumscribing disk;
+        the coefficients keep their values (module notes).
+
+        Parameters
+        ----------
+        shape : ApertureShape
+
+        Raises
+        ------
+        ValueError
+            If ``shape`` is not an ApertureShape or covers no pixel of the frame.
+        """
+        if not isinstance(shape, ApertureShape):
+            raise ValueError(f"shape: expected an ApertureShape, got {type(shape).__name__}")
+        with self._aperture_lock:
+            rendering = self._prepare(shape, revision=self._rendering.revision + 1)
+            with self._lock:
+                self._rendering = rendering
+        logger.info("test optic aperture changed to %s (revision %d)", shape.kind, rendering.revision)
+
+    def _prepare(self, shape: ApertureShape, revision: int) -> _Rendering:
+        height, width = self._size
+        settings = self._settings
+        mask = shape.mask(height, width)
+        if not mask.any():
+            raise ValueError(f"aperture {shape} covers no pixel of the {height} x {width} frame")
+        cx, cy, radius = Aperture.from_mask(mask).enclosing_circle()
+        rows, cols = np.nonzero(mask)
+        u, v = (cols - cx) / radius, (cy - rows) / radius
+        vectors = [self._coefficients] + ([] if self._drift is None else [self._drift])
+        products = np.empty((rows.size, len(vectors)))
+        stacked = np.column_stack(vectors)
+        for start in range(0, rows.size, _BASIS_BLOCK):
+            block = slice(start, start + _BASIS_BLOCK)
+            products[block] = zernike_basis(self._modes, u[block], v[block]) @ stacked
+        maps = []
+        for k in range(len(vectors)):
+            values = np.full((height, width), np.nan)
+            values[rows, cols] = products[:, k]
+            maps.append(_readonly(values))
+        ny, nx = np.indices((height, width), dtype=np.float64) if any(settings.carrier_cycles) else (0.0, 0.0)
+        carrier = 2.0 * np.pi * (settings.carrier_cycles[0] * nx / width - settings.carrier_cycles[1] * ny / height)
+        # wrapped before the cast: float32 then holds the phase to 2.4e-7 rad whatever its size
+        phase = np.mod(2.0 * np.pi * np.where(mask, maps[0], 0.0) + carrier, 2.0 * np.pi).astype(np.float32)
+        phase_drift = None
+        if len(maps) > 1:
+            phase_drift = _readonly((2.0 * np.pi * np.where(mask, maps[1], 0.0)).astype(np.float32))
+        scale = settings.full_scale
+        amplitude = np.where(mask, np.float32(settings.modulation * scale), np.float32(0.0))
+        offset = np.where(mask, np.float32(settings.background * scale), np.float32(settings.halo * scale))
+        return _Rendering(
+            shape=shape, revision=revision, mask=_readonly(mask), pupil=(cx, cy, radius),
+            wavefront=maps[0], wavefront_drift=maps[1] if len(maps) > 1 else None,
+            phase=_readonly(phase), phase_drift=phase_drift,
+            amplitude=_readonly(amplitude), offset=_readonly(offset),
+        )
+
+    # ----------------------------------------------------------------------------- frames
+
+    def truth(self, time_s: float) -> OpticTruth:
+        """The optic's wavefront at ``time_s`` (no frame: no phase shift, no vibration).
+
+        Parameters
+        ----------
+        time_s : float
+            Seconds.
+
+        Returns
+        -------
+        OpticTruth
+        """
+        return self._truth(self._rendering, _finite(time_s, "time_s"), 0.0, 0.0, (0.0, 0.0))
+
+    def interferogram(self, time_s: float, phase_shift_rad: float = 0.0) -> tuple[NDArray, OpticTruth]:
+        """Render one interferogram.
+
+        Parameters
+        ----------
+        time_s : float
+            Seconds (drift and sinusoidal vibration depend on it).
+        phase_shift_rad : float
+            Reference phase ``delta`` added to the phase, radians (``I = A + B cos(phi + delta)``).
+
+        Returns
+        -------
+        frame : ndarray of uint8 (8 bits) or uint16, shape (height, width)
+        truth : OpticTruth
+            With the shift and vibration applied to this frame.
+        """
+        t = _finite(time_s, "time_s")
+        shift = _finite(phase_shift_rad, "phase_shift_rad")
+        settings = self._settings
+        with self._lock:
+            rendering = self._rendering
+            jitter = 0.0
+            if settings.vibration_rms_rad > 0 and settings.vibration_hz == 0:
+                jitter = float(self._rng.standard_normal()) * settings.vibration_rms_rad
+            start = 0 if self._noise is None else int(self._rng.integers(0, _NOISE_POOL_EXTRA + 1))
+        vibration = jitter
+        if settings.vibration_rms_rad > 0 and settings.vibration_hz > 0:
+            vibration = math.sqrt(2.0) * settings.vibration_rms_rad * math.sin(
+                2.0 * math.pi * settings.vibration_hz * t + self._vibration_phase
+            )
+        values = rendering.phase + np.float32(shift + vibration)
+        if rendering.phase_drift is not None:
+            values += np.float32(t) * rendering.phase_drift
+        np.cos(values, out=values)
+        values *= rendering.amplitude
+        values += rendering.offset
+        if self._noise is not None:
+            values += self._noise[start : start + values.size].reshape(values.shape)
+        np.clip(values, 0.0, settings.full_scale, out=values)
+        np.rint(values, out=values)
+        frame = values.astype(np.uint8 if settings.bit_depth == 8 else np.uint16)
+        truth = self._truth(rendering, t, shift, vibration, settings.carrier_cycles)
+        return frame, truth
+
+    def _truth(
+        self, rendering: _Rendering, t: float, shift: float, vibration: float, carrier: tuple[float, float]
+    ) -> OpticTruth:
+        wavefront = rendering.wavefront
+        if rendering.wavefront_drift is not None and t != 0.0:
+            wavefront = _readonly(wavefront + t * rendering.wavefront_drift)
+        return OpticTruth(
+            time_s=t,
+            modes=self._modes,
+            coefficients_waves=self.coefficients(t),
+            pupil_px=rendering.pupil,
+            wavefront_waves=wavefront,
+            mask=rendering.mask,
+            aperture=rendering.shape,
+            aperture_revision=rendering.revision,
+            phase_shift_rad=shift,
+            vibration_rad=vibration,
+            carrier_cycles=(float(carrier[0]), float(carrier[1])),
+        )

@@ -1,0 +1,334 @@
+"""The simulated PLC's program: register layout, watchdog, command handshake, status and outputs.
+
+Re-implemented from the register-map description in the README, without importing the driver's
+codec or map (a shared misunderstanding must not make both ends agree). The program is evaluated
+once per Modbus request (a "scan" per request) and whenever a test reads its ground truth, with
+the caller's clock, so no timer task is needed. It knows nothing about sockets: the server hands it
+each request's address and written values and lets it mirror its state into pymodbus's memory.
+
+Rules:
+
+- the watchdog (:class:`HeartbeatWatchdog`) counts only a *change* of the heartbeat register;
+  tripped, it zeroes the outputs and every request but a write of 1 to the re-arm register is
+  answered with exception 4;
+- a write that changes the command id (to non-zero) applies the command once to the
+  :class:`PolishingStation`; parameters it refuses answer exception 3 and change nothing; before the
+  first heartbeat or with the e-stop pressed, exception 4; while busy, exception 6;
+- the status block holds the status word (bit 0 ready, 1 busy, 2 fault, 3 e-stop, 4 heartbeat
+  seen), the last accepted id and the heartbeat echo (frozen by the ``freeze_heartbeat_echo`` fault).
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import threading
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from pymodbus.constants import ExcCodes
+from pymodbus.simulator import DataType, SimData
+
+from wavestack.simulators.plc.faults import SimFaults
+from wavestack.simulators.plc.polishing import PolishingStation, RemovalCommand
+from wavestack.simulators.plc.watchdog import HeartbeatWatchdog, WatchdogState
+
+__all__ = ["PlcSimLayout", "PolishingPlcProgram", "SimOutputs", "float_to_words", "words_to_float"]
+
+_log = logging.getLogger(__name__)
+
+_READY, _BUSY, _FAULT, _ESTOP, _HEARTBEAT_SEEN = 1, 2, 4, 8, 16
+_ORDERS = ("ABCD", "CDAB", "BADC", "DCBA")
+
+
+def _swap_bytes(word: int) -> int:
+    return ((word & 0xFF) << 8) | (word >> 8)
+
+
+def float_to_words(value: float, order: str) -> list[int]:
+    """Two registers for a float32 in byte order ``order`` (``A`` = most significant byte)."""
+    bits = struct.unpack(">I", struct.pack(">f", value))[0]
+    high, low = bits >> 16, bits & 0xFFFF
+    return {"ABCD": [high, low], "CDAB": [low, high],
+            "BADC": [_swap_bytes(high), _swap_bytes(low)], "DCBA": [_swap_bytes(low), _swap_bytes(high)]}[order]
+
+
+def words_to_float(words: list[int], order: str) -> float:
+    """The float32 in two registers with byte order ``order``."""
+    first, second = words
+    high, low = {"ABCD": (first, second), "CDAB": (second, first),
+                 "BADC": (_swap_bytes(first), _swap_bytes(second)),
+                 "DCBA": (_swap_bytes(second), _swap_bytes(first))}[order]
+    return float(struct.unpack(">f", struct.pack(">I", (high << 16) | low))[0])
+
+
+@dataclass(frozen=True)
+class PlcSimLayout:
+    """The simulated PLC's register layout (same meaning as the driver's register map).
+
+    Attributes
+    ----------
+    unit_id
+        Modbus unit id the PLC answers to.
+    self_check_register, self_check_value, self_check_word_order
+        2-register float32 constant.
+    heartbeat_register, rearm_register
+        Single writable registers.
+    status_register
+        Start of 3 read-only registers: status word, last accepted command id, heartbeat echo.
+    command_block, output_block
+        ``(start, count)``, count = 2 + 2 n for n terms. Command: id, passes, n float32 removals (nm);
+        outputs (read-only): spindle enable, active command id, n float32 set points (nm).
+    command_word_order, output_word_order
+        Byte order of the float32 values in those blocks.
+    watchdog_timeout_s
+        Heartbeat watchdog timeout, s.
+    pass_duration_s
+        Time one polishing pass keeps the PLC busy, s (0: a command completes at once).
+    """
+
+    unit_id: int
+    self_check_register: int
+    self_check_value: float
+    self_check_word_order: str
+    heartbeat_register: int
+    rearm_register: int
+    status_register: int
+    command_block: tuple[int, int]
+    output_block: tuple[int, int]
+    command_word_order: str
+    output_word_order: str
+    watchdog_timeout_s: float
+    pass_duration_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        for order in (self.self_check_word_order, self.command_word_order, self.output_word_order):
+            if order not in _ORDERS:
+                raise ValueError(f"unknown word order {order!r}; expected one of {_ORDERS}")
+        if self.command_block[1] != self.output_block[1] or self.command_block[1] < 4 or self.command_block[1] % 2:
+            raise ValueError(f"command and output blocks must both be 2 + 2 n registers, got "
+                             f"{self.command_block[1]} and {self.output_block[1]}")
+        if self.pass_duration_s < 0:
+            raise ValueError(f"pass_duration_s must be >= 0, got {self.pass_duration_s}")
+        spans = sorted([(self.self_check_register, 2), (self.heartbeat_register, 1), (self.rearm_register, 1),
+                        (self.status_register, 3), self.command_block, self.output_block])
+        for (first, count), (second, _) in zip(spans, spans[1:]):
+            if second < first + count:
+                raise ValueError(f"register blocks starting at {first} and {second} overlap")
+
+    @property
+    def n_terms(self) -> int:
+        """Number of removal terms."""
+        return (self.command_block[1] - 2) // 2
+
+    def simdata(self) -> list[SimData]:
+        """pymodbus register blocks: writable heartbeat, re-arm and command; the rest read-only."""
+        constant = float_to_words(self.self_check_value, self.self_check_word_order)
+        return [
+            SimData(self.self_check_register, values=constant, datatype=DataType.REGISTERS, readonly=True),
+            SimData(self.heartbeat_register, values=0, datatype=DataType.REGISTERS),
+            SimData(self.rearm_register, values=0, datatype=DataType.REGISTERS),
+            SimData(self.status_register, count=3, values=0, datatype=DataType.REGISTERS, readonly=True),
+            SimData(self.command_block[0], count=self.command_block[1], values=0, datatype=DataType.REGISTERS),
+            SimData(self.output_block[0], count=self.output_block[1], values=0, datatype=DataType.REGISTERS,
+                    readonly=True),
+        ]
+
+
+@dataclass(frozen=True)
+class SimOutputs:
+    """Ground truth of the machine outputs; ``setpoint_nm`` has shape (n_terms,), nm."""
+
+    spindle_enabled: bool
+    active_command_id: int
+    setpoint_nm: NDArray[np.float64] = field(repr=False)
+
+    @property
+    def all_zero(self) -> bool:
+        """Every output is zero."""
+        return not self.spindle_enabled and self.active_command_id == 0 and not np.any(self.setpoint_nm)
+
+
+class PolishingPlcProgram:
+    """State and rules of the simulated PLC; thread-safe (the server thread and tests share it).
+
+    Parameters
+    ----------
+    layout
+        Register layout and watchdog timeout.
+    station
+        The polishing model commands act on.
+    faults
+        Fault switches (e-stop, frozen heartbeat echo) the program consults.
+    """
+
+    def __init__(self, layout: PlcSimLayout, station: PolishingStation, faults: SimFaults) -> None:
+        if station.n_terms != layout.n_terms:
+            raise ValueError(f"the station has {station.n_terms} terms but the command block carries {layout.n_terms}")
+        self.layout = layout
+        self.station = station
+        self.faults = faults
+        self._lock = threading.Lock()
+        self._watchdog = HeartbeatWatchdog(layout.watchdog_timeout_s)
+        self._echo = 0
+        self._rearm_value = 0
+        self._command_regs = [0] * layout.command_block[1]
+        self._last_accepted = 0
+        self._fault_latched = False
+        self._busy_until = 0.0
+        self._outputs = self._zero_outputs()
+        self._accepted: list[int] = []
+
+    # ----------------------------------------------------------------------------- ground truth
+    def watchdog_state(self, now: float) -> WatchdogState:
+        """The watchdog's state at ``now``."""
+        with self._lock:
+            self._scan(now)
+            return self._watchdog.state
+
+    def watchdog_trips(self, now: float) -> int:
+        """How many times the watchdog has tripped up to ``now``."""
+        with self._lock:
+            self._scan(now)
+            return self._watchdog.trips
+
+    def outputs(self, now: float) -> SimOutputs:
+        """The machine outputs at ``now``."""
+        with self._lock:
+            self._scan(now)
+            return self._outputs
+
+    @property
+    def last_accepted_id(self) -> int:
+        """Id of the last accepted command (0 = none)."""
+        with self._lock:
+            return self._last_accepted
+
+    @property
+    def accepted_commands(self) -> list[int]:
+        """Ids of every command that took effect, in order."""
+        with self._lock:
+            return list(self._accepted)
+
+    @property
+    def heartbeat_value(self) -> int:
+        """The last heartbeat value the watchdog saw."""
+        with self._lock:
+            return self._watchdog.value
+
+    # ----------------------------------------------------------------------------- one request
+    def on_request(self, address: int, written: list[int] | None, now: float, start_address: int,
+                   registers: list[int]) -> ExcCodes | None:
+        """Run one scan for a request and mirror the state into pymodbus's ``registers``.
+
+        Parameters
+        ----------
+        address
+            First register of the request.
+        written
+            Values a write request carries, None for a read.
+        now
+            The clock, s.
+        start_address, registers
+            pymodbus's register memory (shared block) and the address of its first entry.
+
+        Returns
+        -------
+        ExcCodes | None
+            The exception to answer, or None for a normal reply.
+        """
+        with self._lock:
+            self._scan(now)
+            result = self._handle(address, written, now)
+            self._mirror(start_address, registers, now)
+            return result
+
+    # ----------------------------------------------------------------------------- rules (lock held)
+    def _zero_outputs(self) -> SimOutputs:
+        return SimOutputs(False, 0, np.zeros(self.layout.n_terms))
+
+    def _scan(self, now: float) -> None:
+        if self._watchdog.poll(now):
+            self._outputs = self._zero_outputs()
+            _log.warning("PLC simulator: watchdog tripped (no heartbeat change for %.3f s); outputs zeroed",
+                         self.layout.watchdog_timeout_s)
+
+    def _handle(self, address: int, values: list[int] | None, now: float) -> ExcCodes | None:
+        layout = self.layout
+        written = dict(zip(range(address, address + len(values)), values)) if values is not None else {}
+        if self._watchdog.state is WatchdogState.TRIPPED:
+            if written.get(layout.rearm_register) == 1:
+                self._watchdog.rearm(now)
+                self._rearm_value = 1
+                _log.warning("PLC simulator: watchdog re-armed")
+                return None
+            return ExcCodes.DEVICE_FAILURE
+        if layout.heartbeat_register in written:
+            beat = written[layout.heartbeat_register]
+            self._watchdog.observe(beat, now)
+            if not self.faults.freeze_heartbeat_echo:
+                self._echo = beat
+        if layout.rearm_register in written:
+            self._rearm_value = written[layout.rearm_register]
+        start, count = layout.command_block
+        if any(start <= a < start + count for a in written):
+            merged = list(self._command_regs)
+            for a, v in written.items():
+                if start <= a < start + count:
+                    merged[a - start] = v
+            if start in written and merged[0] not in (0, self._last_accepted):
+                refusal = self._accept(merged, now)
+                if refusal is not None:
+                    return refusal
+            self._command_regs = merged
+        return None
+
+    def _accept(self, registers: list[int], now: float) -> ExcCodes | None:
+        command_id, passes = registers[0], registers[1]
+        if self.faults.estop or self._watchdog.state is not WatchdogState.RUNNING:
+            _log.warning("PLC simulator: command %d refused with exception 4 (e-stop or no heartbeat)", command_id)
+            return ExcCodes.DEVICE_FAILURE
+        if now < self._busy_until:
+            return ExcCodes.DEVICE_BUSY
+        order = self.layout.command_word_order
+        removal = [words_to_float(registers[i:i + 2], order) for i in range(2, len(registers), 2)]
+        command = RemovalCommand(command_id=command_id, removal_nm=tuple(removal), passes=passes)
+        try:
+            self.station.validate(command)
+        except ValueError as error:
+            self._fault_latched = True
+            _log.warning("PLC simulator: command %d refused with exception 3: %s", command_id, error)
+            return ExcCodes.ILLEGAL_VALUE
+        self.station.apply(command)
+        self._last_accepted = command_id
+        self._accepted.append(command_id)
+        self._fault_latched = False
+        self._busy_until = now + passes * self.layout.pass_duration_s
+        self._outputs = SimOutputs(True, command_id, np.asarray(removal, dtype=np.float64))
+        return None
+
+    def _status_word(self, now: float) -> int:
+        running = self._watchdog.state is WatchdogState.RUNNING
+        busy = now < self._busy_until
+        estop = self.faults.estop
+        word = (_BUSY if busy else 0) | (_ESTOP if estop else 0) | (_HEARTBEAT_SEEN if running else 0)
+        word |= _FAULT if (self._fault_latched or estop) else 0
+        word |= _READY if running and not busy and not estop else 0
+        return word
+
+    def _mirror(self, start_address: int, registers: list[int], now: float) -> None:
+        """Write the program's state into pymodbus's memory (which a server restart rebuilds empty)."""
+        layout = self.layout
+
+        def put(address: int, values: list[int]) -> None:
+            registers[address - start_address:address - start_address + len(values)] = values
+
+        put(layout.heartbeat_register, [self._watchdog.value])
+        put(layout.rearm_register, [self._rearm_value])
+        put(layout.status_register, [self._status_word(now), self._last_accepted, self._echo])
+        put(layout.command_block[0], self._command_regs)
+        setpoints: list[int] = []
+        for value in self._outputs.setpoint_nm:
+            setpoints.extend(float_to_words(float(value), layout.output_word_order))
+        put(layout.output_block[0], [int(self._outputs.spindle_enabled), self._outputs.active_command_id, *setpoints])
