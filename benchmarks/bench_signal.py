@@ -25,6 +25,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from wavestack.pipeline import detect_aperture, mode_list  # noqa: E402
+from wavestack.pipeline.aperture_watch import ApertureWatch  # noqa: E402
 from wavestack.pipeline.carrier import carrier_phase  # noqa: E402
 from wavestack.pipeline.psi import four_step, hariharan_five_step  # noqa: E402
 from wavestack.pipeline.shack_hartmann import Centroider, LensletGrid, slopes  # noqa: E402
@@ -92,6 +93,10 @@ def main() -> int:
     carrier = frames_for(phase + 2 * np.pi * cols_i / 12.0, mask, np.zeros(1))[0]
     wrapped = np.angle(np.exp(1j * phase))
     row("mask (detect_aperture on the modulation)", lambda: detect_aperture(modulation), [modulation])
+    found = detect_aperture(modulation)
+    watch = ApertureWatch(found.aperture.mask, found.threshold)
+    row("mask check per frame (ApertureWatch, the station's steady state)", lambda: watch.check(modulation),
+        [modulation])
     row("4-step PSI (uint8 frames)", lambda: four_step(four), [four])
     row("5-step Hariharan (uint8 frames)", lambda: hariharan_five_step(five), [five])
     row("carrier method (uint8 frame)", lambda: carrier_phase(carrier), [carrier])

@@ -61,10 +61,10 @@ class CarrierResult:
 
     Attributes
     ----------
-    phase : ndarray of float64, shape (rows, cols)
+    phase : ndarray of float32, shape (rows, cols)
         Wrapped ``phi`` with the carrier removed, radians in (-pi, pi]; sign convention in the
         module docstring. Meaningless where ``modulation`` is ~0 (outside the mask or fringes).
-    modulation : ndarray of float64, shape (rows, cols)
+    modulation : ndarray of float32, shape (rows, cols)
         ``2 |sideband|``: the fringe amplitude ``B`` in intensity units (lowered near the
         tapered edges of the frame or mask), directly comparable to the PSI modulation.
     carrier : tuple of float
@@ -73,8 +73,8 @@ class CarrierResult:
         The spectral window used around the sideband.
     """
 
-    phase: NDArray[np.float64]
-    modulation: NDArray[np.float64]
+    phase: NDArray[np.float32]
+    modulation: NDArray[np.float32]
     carrier: tuple[float, float]
     window: str
 
@@ -425,12 +425,13 @@ def carrier_phase(
         carrier_rc = (-given[1], given[0])
     field = _sideband_field(spectrum, shape, carrier_rc, window)
 
-    phase = np.arctan2(field.imag, field.real).astype(np.float64)
+    phase = np.arctan2(field.imag, field.real)  # float32, as the complex64 field: ~1e-7 rad
     if sign < 0:
         np.negative(phase, out=phase)
-    np.clip(phase, -np.pi, np.pi, out=phase)
-    np.copyto(phase, np.pi, where=phase == -np.pi)
-    modulation = np.abs(field).astype(np.float64)
+    pi = np.float32(np.pi)  # float32's nearest pi; (-pi, pi] in that precision
+    np.clip(phase, -pi, pi, out=phase)
+    np.copyto(phase, pi, where=phase == -pi)
+    modulation = np.abs(field)
     phase.flags.writeable = False
     modulation.flags.writeable = False
     fx, fy = carrier_rc[1], -carrier_rc[0]

@@ -354,13 +354,37 @@ class Fitter:
         ValueError
             If the vector has the wrong length.
         """
+        values = self._operator[:, : self.n_modes] @ (self._from_coefficients @ self._checked(coefficients))
+        return self._scatter(values)
+
+    def surface_rms(self, coefficients: NDArray[np.floating]) -> float:
+        """RMS over the fitted samples of the surface a coefficient vector describes.
+
+        The same number as the RMS of :meth:`surface` (removed physical terms excluded), but from
+        the orthonormal form: the stored basis columns have unit RMS and are mutually orthogonal
+        on the samples, so the RMS of ``H a`` is ``|a|``. It costs an M x M product instead of a
+        pass over the N x M operator.
+
+        Parameters
+        ----------
+        coefficients : ndarray, shape (M,)
+            Coefficients in this fitter's basis.
+
+        Returns
+        -------
+        float
+            RMS in the units of the coefficients.
+        """
+        return float(np.linalg.norm(self._from_coefficients @ self._checked(coefficients)))
+
+    def _checked(self, coefficients: NDArray[np.floating]) -> NDArray[np.float64]:
+        """A coefficient vector of this fitter's length, as float64."""
         coefficients = np.asarray(coefficients, dtype=np.float64)
         if coefficients.shape != (self.n_modes,):
             raise ValueError(
                 f"coefficients: expected shape ({self.n_modes},), got {coefficients.shape}"
             )
-        values = self._operator[:, : self.n_modes] @ (self._from_coefficients @ coefficients)
-        return self._scatter(values)
+        return coefficients
 
     def export_state(self) -> dict[str, object]:
         """Everything the per-frame path needs, as arrays and JSON-ready values.

@@ -68,7 +68,7 @@ class MeasuredWavefront:
     timings: dict[str, float] = field(default_factory=dict)
 
 
-def local_fringe_contrast(frame: NDArray, period_px: float) -> NDArray[np.float64]:
+def local_fringe_contrast(frame: NDArray, period_px: float) -> NDArray[np.float32]:
     """Local standard deviation of a frame over a box of about two fringe periods.
 
     High wherever there are fringes, whatever their local frequency. The carrier method's
@@ -83,13 +83,19 @@ def local_fringe_contrast(frame: NDArray, period_px: float) -> NDArray[np.float6
 
     Returns
     -------
-    ndarray, shape (rows, cols)
+    ndarray of float32, shape (rows, cols)
     """
     size = max(3, int(round(2 * period_px)) | 1)
-    values = np.asarray(frame, dtype=np.float64)
-    mean = cv2.boxFilter(values, -1, (size, size))
-    square = cv2.boxFilter(values * values, -1, (size, size))
-    return np.sqrt(np.maximum(square - mean * mean, 0.0))
+    # float32 throughout (counts up to 65535 square to < 2^32, well inside float32's range; the
+    # variance's cancellation error is ~1e-7 of the mean square, far below any fringe contrast),
+    # and OpenCV's box filter of squares: two passes instead of four float64 ones.
+    values = np.asarray(frame, dtype=np.float32)
+    mean = cv2.boxFilter(values, cv2.CV_32F, (size, size))
+    square = cv2.sqrBoxFilter(values, cv2.CV_32F, (size, size))
+    cv2.multiply(mean, mean, dst=mean)
+    cv2.subtract(square, mean, dst=square)
+    np.maximum(square, 0.0, out=square)
+    return np.sqrt(square, out=square)
 
 
 def _finish(

@@ -57,3 +57,23 @@ def no_leaked_threads_or_sockets() -> Iterator[None]:
         problems.append(f"{len(leaked_sockets)} socket(s) left open: " + ", ".join(sorted(leaked_sockets)))
     if problems:
         pytest.fail("test leaked resources; " + "; ".join(problems), pytrace=False)
+
+
+@pytest.fixture
+def station_factory() -> Iterator:
+    """Open stations on simulated devices; everything opened is closed when the test ends.
+
+    Calling the factory with a ``StationConfig`` returns ``(station, devices)``.
+    """
+    from contextlib import ExitStack
+
+    from wavestack.station.devices import open_station_devices
+    from wavestack.station.station import Station
+
+    with ExitStack() as stack:
+        def make(config):  # -> tuple[Station, StationDevices]
+            devices = open_station_devices(config, stack)
+            station = Station(config, devices)
+            stack.callback(station.close)
+            return station, devices
+        yield make

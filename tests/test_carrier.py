@@ -80,7 +80,9 @@ def test_recovers_phase_and_carrier(carrier: tuple[float, float], masked: bool) 
     assert np.abs(np.subtract(result.carrier, carrier)).max() < 1e-3
     assert _error(result, _phase(), _inner()) < 0.03
     assert result.window == "hann"
-    assert result.phase.dtype == np.float64 and result.phase.shape == (SIZE, SIZE)
+    # float32, as the complex64 sideband it comes from (phase resolution ~1e-7 rad)
+    assert result.phase.dtype == np.float32 and result.phase.shape == (SIZE, SIZE)
+    assert result.phase.max() <= np.float32(np.pi) and result.phase.min() > -np.float32(np.pi)
     # modulation estimates B = 60 inside, little outside the disk (beyond the window's reach)
     assert np.median(result.modulation[_inner()]) == pytest.approx(60.0, rel=0.05)
     assert np.median(result.modulation[_geometry()[4] > 1.3**2]) < 3.0

@@ -323,3 +323,15 @@ def test_many_modes_use_the_mode_major_operator_and_still_match_lstsq(dtype) -> 
     removed = result.removed
     plane = np.array([removed.piston, removed.tilt_x / 2, removed.tilt_y / 2])
     np.testing.assert_allclose(result.coefficients[:3], expected[:3] - plane, atol=tolerance)
+
+
+@pytest.mark.parametrize("method", ["qr", "circle", "csf-qcm"])
+@pytest.mark.parametrize("remove", [None, "ptt"])
+def test_surface_rms_equals_the_rms_of_the_reconstructed_surface(method: str, remove: str | None) -> None:
+    rows, cols = np.indices((120, 160))
+    mask = (np.hypot(cols - 80, rows - 60) < 55) & (np.hypot(cols - 90, rows - 57) > 15)
+    fitter = build_fitter(mask, method=method, modes=15, remove=remove, dtype=np.float64)
+    coefficients = np.random.default_rng(7).normal(size=15)
+    surface = fitter.surface(coefficients)
+    # the orthonormal shortcut against a pass over every sample: equal to rounding
+    assert fitter.surface_rms(coefficients) == pytest.approx(np.sqrt(np.nanmean(surface ** 2)), rel=1e-10)

@@ -6,19 +6,29 @@ traceback; an unknown option gets argparse's usage error, also status 2.
 
 from __future__ import annotations
 
-import argparse
-import logging
 import os
-import sys
-from collections.abc import Sequence
 
-from wavestack import __version__
-from wavestack.drivers.errors import DeviceError
-from wavestack.analyze_command import add_analyze_arguments, run_analyze
-from wavestack.bench_command import add_bench_arguments, run_bench
-from wavestack.fit_command import add_fit_arguments, run_fit
-from wavestack.pipeline import InputError
-from wavestack.sim_command import add_sim_arguments, run_sim
+# The fits' matrix products are small: a multi-threaded BLAS gains nothing on them, and its
+# spinning worker threads took about one of two cores per result in the station benchmark
+# (80-104 ms of CPU per carrier result) and stretched fitter builds from 0.1 to 0.3 s. One
+# thread unless the user says otherwise; this must run before numpy is imported.
+for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_variable, "1")
+
+import argparse  # noqa: E402
+import logging  # noqa: E402
+import sys  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+
+from wavestack import __version__  # noqa: E402
+from wavestack.drivers.errors import DeviceError  # noqa: E402
+from wavestack.analyze_command import add_analyze_arguments, run_analyze  # noqa: E402
+from wavestack.bench_command import add_bench_arguments, run_bench  # noqa: E402
+from wavestack.fit_command import add_fit_arguments, run_fit  # noqa: E402
+from wavestack.pipeline import InputError  # noqa: E402
+from wavestack.replay_command import add_replay_arguments, run_replay  # noqa: E402
+from wavestack.run_command import add_run_arguments, run_station  # noqa: E402
+from wavestack.sim_command import add_sim_arguments, run_sim  # noqa: E402
 
 EXIT_BAD_INPUT = 2
 EXIT_DEVICE_ERROR = 3
@@ -33,6 +43,19 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"wavestack {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress to stderr")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    run = commands.add_parser(
+        "run", help="run the station (default: the simulated station): stream, refit, record, drive the PLC",
+        description="Run a metrology station: frames -> aperture -> unwrap -> Zernike fit -> results, "
+                    "live view or JSON lines, optional recording, removal commands to the polishing PLC.",
+    )
+    add_run_arguments(run)
+    run.set_defaults(handler=run_station)
+    replay = commands.add_parser(
+        "replay", help="run the pipeline again on a recording (same or other fit settings)",
+        description="Recompute every result of a recording made with wavestack run --record.",
+    )
+    add_replay_arguments(replay)
+    replay.set_defaults(handler=run_replay)
     fit = commands.add_parser(
         "fit",
         help="fit Zernike terms to a wavefront map (.npy)",
@@ -49,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     analyze.set_defaults(handler=run_analyze)
     bench = commands.add_parser(
         "bench", help="run a benchmark and print its figures",
-        description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables.",
+        description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables, 'station' "
+                    "measures the simulated station (results per second, latency, stages, aperture change).",
     )
     add_bench_arguments(bench)
     bench.set_defaults(handler=run_bench)

@@ -51,9 +51,20 @@ def _u3v_interfaces(dev: usb.core.Device) -> tuple[Any, Any] | None:
 
 
 def find_device(backend: Any, serial: str | None) -> usb.core.Device | None:
-    """The first USB3 Vision device (by interface class) with this serial number (any if ``None``)."""
-    for dev in usb.core.find(find_all=True, backend=backend,
-                             custom_match=lambda d: _u3v_interfaces(d) is not None):
+    """The first USB3 Vision device (by interface class) with this serial number (any if ``None``).
+
+    Raises
+    ------
+    DeviceDisconnected
+        pyusb has no backend (libusb is not installed): no camera can be reached.
+    """
+    try:
+        found_devices = list(usb.core.find(find_all=True, backend=backend,
+                                           custom_match=lambda d: _u3v_interfaces(d) is not None))
+    except usb.core.NoBackendError:
+        raise DeviceDisconnected("USB3 Vision camera", "pyusb found no USB backend: expected libusb-1.0 to be "
+                                 "installed (e.g. apt install libusb-1.0-0); sim://u3v needs none") from None
+    for dev in found_devices:
         if serial is None:
             return dev
         try:

@@ -179,6 +179,7 @@ class PolishingPlcProgram:
         self._busy_until = 0.0
         self._outputs = self._zero_outputs()
         self._accepted: list[int] = []
+        self._accepted_removals: list[tuple[float, ...]] = []
 
     # ----------------------------------------------------------------------------- ground truth
     def watchdog_state(self, now: float) -> WatchdogState:
@@ -210,6 +211,12 @@ class PolishingPlcProgram:
         """Ids of every command that took effect, in order."""
         with self._lock:
             return list(self._accepted)
+
+    @property
+    def accepted_removals(self) -> list[tuple[float, ...]]:
+        """The removal (nm per term) of every command that took effect, in order (ground truth)."""
+        with self._lock:
+            return list(self._accepted_removals)
 
     @property
     def heartbeat_value(self) -> int:
@@ -303,6 +310,7 @@ class PolishingPlcProgram:
         self.station.apply(command)
         self._last_accepted = command_id
         self._accepted.append(command_id)
+        self._accepted_removals.append(tuple(removal))
         self._fault_latched = False
         self._busy_until = now + passes * self.layout.pass_duration_s
         self._outputs = SimOutputs(True, command_id, np.asarray(removal, dtype=np.float64))

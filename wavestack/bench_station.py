@@ -1,0 +1,508 @@
+"""``wavestack bench station``: the station's speed on the simulated bench, path by path.
+
+For each path -- the carrier path (the configuration with ``[processing] method = "carrier"``
+and tilt fringes on the optic) and the phase-stepping path (the configuration as is) -- one run
+of the real station on its simulated devices measures:
+
+* results per second and latency p50/p99 over ``N`` results, after a warm-up that ends once
+  results come from the configured fitter (no longer the ``qr`` stand-in) of the first aperture;
+* the mean time per stage (``StationResult.timings_ms``) and the per-result time ``1 / rate``;
+  then the same stages alone: :meth:`SetProcessor.process` in a loop on sets recorded during the
+  run, with no device running. ``per-result time / alone stage sum`` is the overhead the station
+  adds (target <= 1.5);
+* the simulator's share of the process CPU time. Camera: the thread CPU time
+  (``time.thread_time``) spent inside the simulated USB backend's ``bulk_read`` and
+  ``bulk_write`` (rendering the optic -- also timed alone --, encoding the payload, copying it
+  into the host's buffer). Piezo: thread CPU time inside ``MDT693BDevice.feed``. PLC: the CPU time
+  of the simulator's server thread (pymodbus on its own asyncio loop), read from
+  ``/proc/self/task`` like the CPU time of every other thread. Process CPU: ``time.process_time``;
+* the aperture change: the optic's aperture is changed mid-run; the times from the change to the
+  first result that detects it (``aperture.changed``) and to the first result on the configured
+  fitter of the new aperture ("results from the new map").
+
+Nothing is asserted: the figures are printed beside the targets with a pass/miss mark (the
+machine may be shared and noisy; the load average at the start is printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import threading
+import time
+from collections.abc import Callable, Sequence
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wavestack.arguments import positive_int
+from wavestack.drivers.errors import DeviceError
+from wavestack.drivers.frames import Frame
+from wavestack.simulators.optic import ApertureShape
+from wavestack.station.devices import StationDevices, open_station_devices
+from wavestack.station.processing import ProcessedSet, SetProcessor
+from wavestack.station.results import StationResult
+from wavestack.station.settings import StationConfig, load_station_config
+from wavestack.station.station import Station
+
+logger = logging.getLogger(__name__)
+
+STAGES = ("phase", "aperture", "unwrap", "fit")
+CARRIER_CYCLES_1024 = (60.0, 35.0)  # tilt fringes across a 1024-pixel frame; scaled to the frame size
+TARGET_RESULTS_PER_S = 20.0  # carrier path
+TARGET_P99_MS = 150.0  # carrier path
+TARGET_NEW_MAP_S = 1.0
+TARGET_OVERHEAD = 1.5
+WARMUP_EXTRA = 2  # results on the configured fitter before the measurement starts
+RECORDED_SETS = 8  # sets kept for the stage benchmark (a 1024 x 1024 five-frame set is 10 MB)
+WARMUP_LIMIT_S = 90.0
+CHANGE_LIMIT_S = 30.0
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+@dataclass(frozen=True)
+class StationPathFigures:
+    """What one path measured; ``*_ms`` are milliseconds per result, ``*_s`` seconds.
+
+    ``path`` ("carrier" or "psi") and ``description`` (method, frame, carrier or steps, fitter)
+    name it. ``results`` were measured after ``warmup_results`` (``warmup_s``) until the
+    configured fitter of the first aperture was in use. ``results_per_s`` over the measured
+    results, ``per_result_ms = 1000 / results_per_s``, latency percentiles from the first frame's
+    arrival. ``stage_ms`` / ``stage_median_ms``: mean / median per stage in the station;
+    ``alone_stage_ms``: mean per stage of ``SetProcessor.process`` alone (``alone_runs`` calls,
+    ``alone_process_ms`` per call); ``overhead_ratio = per_result_ms / sum(alone_stage_ms)``;
+    ``outside_stages_ms = per_result_ms - sum(stage_ms)`` (truth comparison, PLC, waiting for a
+    set), of which ``plc_io_ms`` (wall time in the PLC link's calls, ``plc_requests_per_result``
+    Modbus requests).
+    ``process_cpu_ms``: process CPU per result; ``simulator_cpu_ms``: ``camera`` (USB backend
+    transfers, render included), ``render`` (the optic alone), ``piezo``, ``plc``;
+    ``simulator_share = (camera + piezo + plc) / process_cpu_ms``; ``thread_cpu_ms``: per thread
+    role ("native pools" are threads Python did not start: BLAS, OpenCV). ``set_arrival_ms``:
+    median first-to-last frame arrival of a set (0 for carrier). ``frames_acquired`` /
+    ``frames_dropped`` over the measured window. Aperture change: ``aperture_set_s`` (the
+    simulator's own ``set_aperture``, not counted), ``aperture_detect_s`` and
+    ``aperture_new_map_s`` from the change (None: not within the limit), and the number of
+    ``aperture_changes`` the station reported (1 expected).
+    """
+
+    path: str
+    description: str
+    results: int
+    warmup_results: int
+    warmup_s: float
+    results_per_s: float
+    per_result_ms: float
+    latency_p50_ms: float
+    latency_p99_ms: float
+    stage_ms: dict[str, float]
+    outside_stages_ms: float
+    plc_io_ms: float
+    plc_requests_per_result: float
+    stage_median_ms: dict[str, float]
+    alone_stage_ms: dict[str, float]
+    alone_process_ms: float
+    alone_runs: int
+    overhead_ratio: float
+    process_cpu_ms: float
+    simulator_cpu_ms: dict[str, float]
+    simulator_share: float
+    thread_cpu_ms: dict[str, float]
+    set_arrival_ms: float
+    frames_acquired: int
+    frames_dropped: int
+    aperture_set_s: float | None
+    aperture_detect_s: float | None
+    aperture_new_map_s: float | None
+    aperture_changes: int
+
+
+def add_station_bench_arguments(parser: argparse.ArgumentParser, *, json_option: bool = True) -> None:
+    """Declare ``--config``, ``--results`` and (unless the caller declares it) ``--json``."""
+    parser.add_argument("--config", type=Path, help="station TOML (default: the simulated station)")
+    parser.add_argument("--results", type=positive_int, default=60, metavar="N",
+                        help="results measured per path after the warm-up (default 60)")
+    if json_option:
+        parser.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+
+
+def run_station_bench(args: argparse.Namespace) -> int:
+    """Measure both paths and print the figures (text, or JSON with ``args.json``); returns 0.
+
+    Raises
+    ------
+    ValueError
+        A configuration without a simulated camera (the benchmark needs the simulated bench).
+    """
+    config = load_station_config(args.config)
+    if not config.camera.simulated or config.optic is None:
+        raise ValueError(f"{config.source}: bench station needs the simulated camera ([camera] url = 'sim://u3v')")
+    paths = [("carrier", carrier_config(config))] + ([("psi", config)] if config.processing.method == "psi" else [])
+    machine = machine_state()
+    figures = [measure_path(name, path_config, args.results) for name, path_config in paths]
+    if getattr(args, "json", False):
+        print(json.dumps({"benchmark": "station", "config": config.source, "machine": machine,
+                          "targets": _targets(), "paths": [_json_ready(asdict(f)) for f in figures]}))
+    else:
+        print("\n".join(format_figures(config.source, figures, machine)))
+    return 0
+
+
+def machine_state() -> dict[str, Any]:
+    """CPUs, the 1-minute load average (other processes share the cores) and the BLAS thread setting."""
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return {"cpus": os.cpu_count(), "load_average_1min": load,
+            "openblas_num_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset")}
+
+
+def carrier_config(config: StationConfig, cycles: tuple[float, float] | None = None) -> StationConfig:
+    """The carrier variant of a simulated station: ``method = "carrier"``, tilt fringes, no piezo.
+
+    Parameters
+    ----------
+    config : StationConfig
+        A simulated station.
+    cycles : (float, float), optional
+        Fringes across the width and height; default: the optic's own carrier, or (60, 35) scaled
+        from 1024 pixels to the frame (a fringe period of about 14.7 pixels).
+    """
+    assert config.optic is not None
+    sim = config.camera_simulator
+    if cycles is None:
+        cycles = config.optic.carrier_cycles
+        if not any(cycles):
+            cycles = (CARRIER_CYCLES_1024[0] * sim.width / 1024, CARRIER_CYCLES_1024[1] * sim.height / 1024)
+    return replace(config, processing=replace(config.processing, method="carrier"),
+                   optic=replace(config.optic, carrier_cycles=(float(cycles[0]), float(cycles[1]))),
+                   pzt=None, pzt_simulator=None)
+
+
+def changed_aperture(width: int, height: int) -> ApertureShape:
+    """The aperture the optic is switched to mid-run: a tilted ellipse, nothing like the annulus."""
+    return ApertureShape(kind="ellipse", centre_px=(0.5 * width, 0.5 * height),
+                         semi_axes_px=(0.40 * width, 0.30 * height), rotation_deg=25.0)
+
+
+# ---------------------------------------------------------------------------------- CPU time
+
+
+class _Meter:
+    """Time spent inside wrapped callables, summed by key, on ``clock`` (thread CPU or wall time)."""
+
+    def __init__(self, clock: Callable[[], float]) -> None:
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._totals: dict[str, float] = {}
+
+    def wrap(self, key: str, function: F) -> F:
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            start = self._clock()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                spent = self._clock() - start
+                with self._lock:
+                    self._totals[key] = self._totals.get(key, 0.0) + spent
+        return timed  # type: ignore[return-value]
+
+    def snapshot(self) -> dict[str, float]:
+        with self._lock:
+            return dict(self._totals)
+
+
+def _instrument(devices: StationDevices, cpu: _Meter, wall: _Meter) -> None:
+    """Wrap the simulated devices' entry points (CPU) and the PLC link's calls (wall), these instances only."""
+    bench = devices.bench
+    assert bench is not None
+    backend = bench.backend
+    backend.bulk_read = cpu.wrap("camera", backend.bulk_read)  # type: ignore[method-assign]
+    backend.bulk_write = cpu.wrap("camera", backend.bulk_write)  # type: ignore[method-assign]
+    bench.optic.interferogram = cpu.wrap("render", bench.optic.interferogram)  # type: ignore[method-assign]
+    if bench.piezo is not None:
+        bench.piezo.feed = cpu.wrap("piezo", bench.piezo.feed)  # type: ignore[method-assign]
+    if devices.link is not None:
+        for name in ("heartbeat", "send_removal", "read_status", "rearm"):
+            setattr(devices.link, name, wall.wrap("plc", getattr(devices.link, name)))
+
+
+_THREAD_ROLES = (("MainThread", "pipeline"), ("u3v-reader", "camera reader"), ("phase-step", "phase stepping"),
+                 ("plc-simulator", "plc"), ("fitter-build", "fitter build"))
+
+
+def _thread_cpu_s() -> dict[str, float]:
+    """CPU seconds (user + system) of every thread of the process by role (Linux ``/proc``; else empty)."""
+    ticks = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    roles = {thread.native_id: next((r for prefix, r in _THREAD_ROLES if thread.name.startswith(prefix)), "other")
+             for thread in threading.enumerate()}
+    found: dict[str, float] = {}
+    try:
+        tasks = os.listdir("/proc/self/task")
+    except OSError:
+        return found
+    for task in tasks:
+        try:
+            with open(f"/proc/self/task/{task}/stat", "rb") as stat:
+                fields = stat.read().rsplit(b")", 1)[1].split()
+        except (OSError, IndexError):  # the thread ended meanwhile
+            continue
+        role = roles.get(int(task), "native pools")
+        found[role] = found.get(role, 0.0) + (int(fields[11]) + int(fields[12])) / ticks  # utime, stime
+    return found
+
+
+@dataclass(frozen=True)
+class _Mark:
+    wall_s: float
+    process_s: float
+    simulators: dict[str, float]
+    threads: dict[str, float]
+    io_wall: dict[str, float]
+    plc_requests: int
+
+
+def _mark(devices: StationDevices, cpu: _Meter, wall: _Meter) -> _Mark:
+    requests = devices.plc_simulator.request_count if devices.plc_simulator is not None else 0
+    return _Mark(time.perf_counter(), time.process_time(), cpu.snapshot(), _thread_cpu_s(), wall.snapshot(), requests)
+
+
+def _per_result_ms(start: dict[str, float], end: dict[str, float], results: int) -> dict[str, float]:
+    return {key: (value - start.get(key, 0.0)) * 1e3 / results for key, value in sorted(end.items())}
+
+
+# ---------------------------------------------------------------------------------- the run
+
+
+class _PathRun:
+    """The result sink of one path: warm-up, measurement, aperture change; sets ``stop`` when done."""
+
+    def __init__(self, devices: StationDevices, results: int, meters: tuple[_Meter, _Meter], stop: threading.Event,
+                 new_aperture: ApertureShape) -> None:
+        self.devices, self.wanted, self.meters, self.stop = devices, results, meters, stop
+        self.new_aperture = new_aperture
+        self.state = "warmup"
+        self.started = time.perf_counter()
+        self.warmup_s = 0.0
+        self.warmup_results = self.on_fitter = self.changes = 0
+        self.measured: list[StationResult] = []
+        self.arrivals_ms: list[float] = []
+        self.recorded: list[list[NDArray[Any]]] = []
+        self.marks: list[_Mark] = []
+        self.counters: list[tuple[int, int]] = []  # (acquired, dropped) at the start and end of the window
+        self.set_aperture_s: float | None = None
+        self.detect_s: float | None = None
+        self.new_map_s: float | None = None
+        self.changed_at = 0.0
+        self.detected_id: int | None = None
+
+    def __call__(self, result: StationResult, frames: tuple[Frame, ...], processed: ProcessedSet) -> None:
+        now = time.perf_counter()
+        if self.state == "warmup":
+            self.warmup_results += 1
+            self.on_fitter += result.valid and not result.fitter_fallback
+            if self.on_fitter >= WARMUP_EXTRA:
+                self.state, self.warmup_s = "measure", now - self.started
+                self._take_mark(result)
+            elif now - self.started > WARMUP_LIMIT_S:
+                logger.warning("no result on the configured fitter after %.0f s; stopping", WARMUP_LIMIT_S)
+                self.stop.set()
+        elif self.state == "measure":
+            self.measured.append(result)
+            if len(frames) > 1:
+                self.arrivals_ms.append((frames[-1].host_time_ns - frames[0].host_time_ns) * 1e-6)
+            if len(self.recorded) < RECORDED_SETS and processed.valid:
+                self.recorded.append([f.pixels for f in frames])
+            if len(self.measured) >= self.wanted:
+                self._take_mark(result)
+                self._change_aperture()
+        elif self.state == "change":
+            self._follow_change(result, now)
+
+    def _take_mark(self, result: StationResult) -> None:
+        self.marks.append(_mark(self.devices, *self.meters))
+        self.counters.append((result.counters.acquired, result.counters.dropped))
+
+    def _change_aperture(self) -> None:
+        assert self.devices.bench is not None
+        tick = time.perf_counter()
+        self.devices.bench.optic.set_aperture(self.new_aperture)
+        self.changed_at = time.perf_counter()
+        self.set_aperture_s = self.changed_at - tick
+        self.state = "change"
+
+    def _follow_change(self, result: StationResult, now: float) -> None:
+        aperture_id = result.aperture.get("id")
+        if result.aperture.get("changed"):
+            self.changes += 1
+            if self.detect_s is None:
+                self.detect_s, self.detected_id = now - self.changed_at, aperture_id
+        if (self.detected_id is not None and aperture_id is not None and aperture_id >= self.detected_id
+                and result.valid and not result.fitter_fallback):
+            self.new_map_s, self.state = now - self.changed_at, "done"
+            self.stop.set()
+        elif now - self.changed_at > CHANGE_LIMIT_S:
+            logger.warning("no result from the new aperture's map within %.0f s", CHANGE_LIMIT_S)
+            self.stop.set()
+
+
+def _stage_benchmark(config: StationConfig, sets: Sequence[Sequence[NDArray[Any]]],
+                     runs: int) -> tuple[dict[str, float], float]:
+    """Mean ms per stage and per ``process`` call of a fresh processor on recorded sets, no devices."""
+    processor = SetProcessor(config.processing, background_builds=False)
+    totals = dict.fromkeys(STAGES, 0.0)
+    wall, valid = 0.0, 0
+    try:
+        processor.process(sets[0])  # aperture detection and the synchronous fitter build
+        for index in range(runs):
+            tick = time.perf_counter()
+            processed = processor.process(sets[index % len(sets)])
+            wall += time.perf_counter() - tick
+            valid += processed.valid
+            for stage in STAGES:
+                totals[stage] += processed.timings_s.get(stage, 0.0) if processed.valid else 0.0
+    finally:
+        processor.close()
+    return {stage: totals[stage] * 1e3 / max(valid, 1) for stage in STAGES}, wall * 1e3 / runs
+
+
+def _describe(name: str, config: StationConfig) -> str:
+    s, sim, optic = config.processing, config.camera_simulator, config.optic
+    what = (f"carrier {optic.carrier_cycles[0]:g} x {optic.carrier_cycles[1]:g} cycles"
+            if name == "carrier" and optic is not None else f"{len(s.steps_deg)} steps, {s.psi_algorithm}")
+    return f"{s.method}, {sim.width} x {sim.height} {sim.pixel_format}, {what}, {s.fit_method} / {s.modes} modes"
+
+
+def measure_path(name: str, config: StationConfig, results: int) -> StationPathFigures:
+    """Run the station of ``config`` on its simulated devices and measure one path.
+
+    Parameters
+    ----------
+    name : str
+        "carrier" or "psi" (a label).
+    config : StationConfig
+        A simulated station (``sim://u3v``).
+    results : int
+        Results measured after the warm-up.
+
+    Returns
+    -------
+    StationPathFigures
+
+    Raises
+    ------
+    DeviceError
+        Fewer results than asked for within the time limits (the log says why).
+    """
+    meters, stop, sim = (_Meter(time.thread_time), _Meter(time.perf_counter)), threading.Event(), config.camera_simulator
+    with ExitStack() as stack:
+        devices = open_station_devices(config, stack)
+        _instrument(devices, *meters)
+        station = Station(config, devices)
+        stack.callback(station.close)
+        run = _PathRun(devices, results, meters, stop, changed_aperture(sim.width, sim.height))
+        station.run(stop=stop, on_result=run, duration_s=WARMUP_LIMIT_S + CHANGE_LIMIT_S + 5.0 * results)
+    if len(run.measured) < results or len(run.marks) < 2 or not run.recorded:
+        raise DeviceError(f"simulated station ({name} path)", f"expected {results} results after the warm-up, got "
+                          f"{len(run.measured)} after {run.warmup_results} warm-up results; see the log (-v)")
+    (start, end), n = run.marks, len(run.measured)
+    elapsed = end.wall_s - start.wall_s
+    latencies = np.array([r.latency_ms for r in run.measured])
+    per_stage = {stage: np.array([r.timings_ms.get(stage, np.nan) for r in run.measured]) for stage in STAGES}
+    alone, alone_ms = _stage_benchmark(config, run.recorded, results)
+    threads = _per_result_ms(start.threads, end.threads, n)
+    simulators = {"camera": 0.0, **_per_result_ms(start.simulators, end.simulators, n), "plc": threads.get("plc", 0.0)}
+    process_ms = (end.process_s - start.process_s) * 1e3 / n
+    stage_ms = {k: float(np.nanmean(v)) for k, v in per_stage.items()}
+    return StationPathFigures(
+        path=name, description=_describe(name, config), results=n, warmup_results=run.warmup_results,
+        warmup_s=run.warmup_s, results_per_s=n / elapsed, per_result_ms=elapsed * 1e3 / n,
+        latency_p50_ms=float(np.percentile(latencies, 50)), latency_p99_ms=float(np.percentile(latencies, 99)),
+        stage_ms=stage_ms, outside_stages_ms=elapsed * 1e3 / n - sum(stage_ms.values()),
+        plc_io_ms=(end.io_wall.get("plc", 0.0) - start.io_wall.get("plc", 0.0)) * 1e3 / n,
+        plc_requests_per_result=(end.plc_requests - start.plc_requests) / n,
+        stage_median_ms={k: float(np.nanmedian(v)) for k, v in per_stage.items()},
+        alone_stage_ms=alone, alone_process_ms=alone_ms, alone_runs=results,
+        overhead_ratio=elapsed * 1e3 / n / max(sum(alone.values()), 1e-9), process_cpu_ms=process_ms,
+        simulator_cpu_ms=simulators,
+        simulator_share=(simulators["camera"] + simulators.get("piezo", 0.0) + simulators["plc"]) / process_ms,
+        thread_cpu_ms=threads, set_arrival_ms=float(np.median(run.arrivals_ms)) if run.arrivals_ms else 0.0,
+        frames_acquired=run.counters[1][0] - run.counters[0][0], frames_dropped=run.counters[1][1] - run.counters[0][1],
+        aperture_set_s=run.set_aperture_s, aperture_detect_s=run.detect_s, aperture_new_map_s=run.new_map_s,
+        aperture_changes=run.changes,
+    )
+
+
+# ---------------------------------------------------------------------------------- output
+
+
+def _targets() -> dict[str, float]:
+    return {"carrier_results_per_s_min": TARGET_RESULTS_PER_S, "carrier_latency_p99_ms_max": TARGET_P99_MS,
+            "aperture_new_map_s_max": TARGET_NEW_MAP_S, "overhead_ratio_max": TARGET_OVERHEAD}
+
+
+def _json_ready(value: Any) -> Any:
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    return value
+
+
+def _target(text: str, ok: bool) -> str:
+    return f"target {text}: {'pass' if ok else 'MISS'}"
+
+
+def _seconds(value: float | None) -> str:
+    return "not within the limit" if value is None else f"{value:.2f} s"
+
+
+def format_figures(source: str, figures: Sequence[StationPathFigures],
+                   machine: dict[str, Any] | None = None) -> list[str]:
+    """The figures as text lines, targets beside them (``machine``: see :func:`machine_state`)."""
+    lines = [f"wavestack bench station: {source}"]
+    if machine is not None:
+        lines.append(f"machine: {machine['cpus']} CPUs, load average {machine['load_average_1min']:.2f} at the "
+                     f"start, OPENBLAS_NUM_THREADS={machine['openblas_num_threads']}")
+    row = "{:<24}{:<48}{}".format
+    for f in figures:
+        carrier = f.path == "carrier"
+        new_map_ok = f.aperture_new_map_s is not None and f.aperture_new_map_s <= TARGET_NEW_MAP_S
+        lines += [
+            "", f"== {f.path} path: {f.description}",
+            f"   {f.results} results measured after a warm-up of {f.warmup_results} results ({f.warmup_s:.1f} s, "
+            "until the configured fitter was in use); stage times are over the same results",
+            row("results/s", f"{f.results_per_s:.1f}",
+                _target(f">= {TARGET_RESULTS_PER_S:g}", f.results_per_s >= TARGET_RESULTS_PER_S) if carrier else ""),
+            row("latency p50 / p99", f"{f.latency_p50_ms:.0f} / {f.latency_p99_ms:.0f} ms",
+                _target(f"p99 <= {TARGET_P99_MS:g} ms", f.latency_p99_ms <= TARGET_P99_MS) if carrier else ""),
+            row("per-result time", f"{f.per_result_ms:.1f} ms (1 / rate)", ""),
+            row("set arrival", f"{f.set_arrival_ms:.1f} ms (first to last frame of a set, median)", ""),
+            row("stage ms", "station mean / median | alone mean", ""),
+            *(row(f"  {stage}", f"{f.stage_ms[stage]:.1f} / {f.stage_median_ms[stage]:.1f} | "
+                                f"{f.alone_stage_ms[stage]:.1f}", "") for stage in STAGES),
+            row("  sum of stages", f"{sum(f.stage_ms.values()):.1f} | {sum(f.alone_stage_ms.values()):.1f} "
+                                   f"(alone: {f.alone_runs} runs on recorded sets)", ""),
+            row("  process() alone", f"{f.alone_process_ms:.1f} ms per call", ""),
+            row("outside the stages", f"{f.outside_stages_ms:.1f} ms per result (truth comparison, PLC, "
+                                      "waiting for a set)", ""),
+            row("  PLC I/O", f"{f.plc_io_ms:.1f} ms per result, {f.plc_requests_per_result:.1f} Modbus requests", ""),
+            row("hidden overhead", f"{f.overhead_ratio:.2f} x (per-result time / alone stage sum)",
+                _target(f"<= {TARGET_OVERHEAD:g}", f.overhead_ratio <= TARGET_OVERHEAD)),
+            row("process CPU", f"{f.process_cpu_ms:.1f} ms per result "
+                               f"({f.process_cpu_ms / f.per_result_ms:.2f} cores busy)", ""),
+            row("simulator share", f"{100 * f.simulator_share:.0f} % of the process CPU", ""),
+            "   simulator CPU ms per result (thread CPU inside the simulated devices; camera = USB transfers "
+            "incl. render): " + ", ".join(f"{k} {v:.1f}" for k, v in f.simulator_cpu_ms.items()),
+            "   CPU ms per result by thread: " + ", ".join(f"{k} {v:.1f}" for k, v in f.thread_cpu_ms.items()),
+            row("frames", f"{f.frames_acquired} acquired, {f.frames_dropped} dropped", ""),
+            row("aperture change", f"detected {_seconds(f.aperture_detect_s)}, new map "
+                                   f"{_seconds(f.aperture_new_map_s)}", _target(f"<= {TARGET_NEW_MAP_S:g} s", new_map_ok)),
+            f"   (the optic's own set_aperture took {_seconds(f.aperture_set_s)}, not counted; aperture changes "
+            f"reported: {f.aperture_changes})",
+        ]
+    return lines

@@ -1,0 +1,180 @@
+"""Open a station's devices from its configuration: real hardware, or the simulated bench.
+
+``sim://`` URLs make the station build the simulators itself, so nothing has to be launched by
+hand: the test optic and the USB3 Vision camera that looks at it (a pyusb backend) -- through an
+interferometer, or behind a lenslet array for a Shack-Hartmann station -- the MDT693B
+behind ``sim://mdt693b/NAME`` (wired to the camera so the fringes move with its voltage), and the
+polishing PLC on a free loopback port. The drivers are the same either way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from contextlib import ExitStack
+from dataclasses import dataclass
+from typing import Any
+
+from wavestack.drivers.frames import Frame
+from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
+from wavestack.drivers.plc import PolishingLink
+from wavestack.drivers.u3v import U3VCamera
+from wavestack.pzt_settings import build_calibration, build_piezo, build_simulated_device
+from wavestack.simulators import attach_simulated_device, register_serial_simulators
+from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
+from wavestack.simulators.optic import TestOptic
+from wavestack.simulators.plc import PlcSimulator
+from wavestack.simulators.spots import SpotRenderer, SpotTruth
+from wavestack.simulators.u3v import U3VSimSettings
+from wavestack.station.settings import StationConfig
+
+logger = logging.getLogger(__name__)
+
+_BIT_DEPTH = {"Mono8": 8, "Mono12": 12, "Mono16": 16}
+
+
+@dataclass(eq=False)
+class StationDevices:
+    """The open devices of a station (and the simulators behind them, when simulated).
+
+    Attributes
+    ----------
+    camera : U3VCamera
+    piezo : MDT693B or None
+    calibration : PhaseStepCalibration or None
+    link : PolishingLink or None
+    bench : SimulatedInterferometer or SimulatedShackHartmann or None
+        The simulated bench (ground truth), when the camera is simulated.
+    plc_simulator : PlcSimulator or None
+    """
+
+    camera: U3VCamera
+    piezo: MDT693B | None = None
+    calibration: PhaseStepCalibration | None = None
+    link: PolishingLink | None = None
+    bench: SimulatedInterferometer | SimulatedShackHartmann | None = None
+    plc_simulator: PlcSimulator | None = None
+
+    def truth(self, frame: Frame) -> FrameTruth | SpotTruth | None:
+        """The simulator's ground truth of a frame (None on real hardware or when evicted).
+
+        A :class:`FrameTruth` from a simulated interferometer, a :class:`SpotTruth` from a
+        simulated Shack-Hartmann camera.
+        """
+        if self.bench is None:
+            return None
+        try:
+            return self.bench.camera.truth(frame.frame_id)
+        except KeyError:
+            return None
+
+
+def configure_camera(camera: U3VCamera, config: StationConfig) -> None:
+    """Apply the configured pixel format, exposure and trigger mode (again after a reopen)."""
+    timeout = config.camera.timeout_s
+    if config.camera.pixel_format is not None:
+        camera.set_pixel_format(config.camera.pixel_format, timeout)
+    if config.camera.exposure_us is not None:
+        camera.set_exposure_us(config.camera.exposure_us, timeout)
+    camera.set_trigger_mode(config.phase_stepping, timeout)
+
+
+def _simulated_bench(config: StationConfig, stack: ExitStack) -> tuple[SimulatedInterferometer, Any]:
+    sim = config.camera_simulator
+    optic_settings = config.optic
+    assert optic_settings is not None  # parse_station_config requires [optic] for sim://u3v
+    if optic_settings.bit_depth != _BIT_DEPTH[sim.pixel_format]:
+        raise ValueError(f"{config.source}: [optic] bit_depth {optic_settings.bit_depth} does not match "
+                         f"[camera.simulator] pixel_format {sim.pixel_format!r}")
+    piezo_device = None
+    if config.pzt is not None and config.pzt.url.startswith("sim://"):
+        assert config.pzt_simulator is not None
+        piezo_device = build_simulated_device(config.pzt_simulator)
+    bench = SimulatedInterferometer(
+        TestOptic(optic_settings, sim.height, sim.width),
+        U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
+                       frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml),
+        piezo_device, config.bench)
+    return bench, piezo_device
+
+
+def _simulated_shack_hartmann(config: StationConfig) -> SimulatedShackHartmann:
+    sim = config.camera_simulator
+    assert config.optic is not None and config.lenslets is not None  # required by parse_station_config
+    spots = SpotRenderer(TestOptic(config.optic, sim.height, sim.width), config.lenslets, sim.height, sim.width)
+    return SimulatedShackHartmann(
+        spots, U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
+                              frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml))
+
+
+def _piezo_url(url: str, name: str) -> str:
+    """``sim://mdt693b`` gets a device name so the station's bench and driver share one device."""
+    scheme_and_model, _, rest = url.partition("?")
+    if scheme_and_model.count("/") == 2:  # sim://model without a name
+        scheme_and_model = f"{scheme_and_model.rstrip('/')}/{name}"
+    return scheme_and_model + (f"?{rest}" if rest else "")
+
+
+def open_station_devices(config: StationConfig, stack: ExitStack) -> StationDevices:
+    """Open (and, for ``sim://`` URLs, first build) every device; ``stack`` closes them all.
+
+    Raises
+    ------
+    DeviceError
+        A device that does not answer at start, or a PLC whose self-check fails.
+    ValueError
+        Inconsistent simulator settings.
+    """
+    timeout = config.camera.timeout_s
+    bench: SimulatedInterferometer | SimulatedShackHartmann | None = None
+    piezo_device = None
+    if config.camera.simulated:
+        if config.station.kind == "shack-hartmann":
+            bench = _simulated_shack_hartmann(config)
+        else:
+            bench, piezo_device = _simulated_bench(config, stack)
+        camera = U3VCamera.open(backend=bench.backend, timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
+    else:
+        camera = U3VCamera.open(serial=config.camera.serial, timeout_s=timeout,
+                                ring_capacity=config.camera.ring_capacity)
+    stack.callback(camera.close)
+    configure_camera(camera, config)
+    devices = StationDevices(camera=camera, bench=bench)
+
+    if config.pzt is not None and config.phase_stepping:
+        settings = config.pzt
+        if settings.url.startswith("sim://"):
+            register_serial_simulators()
+            name = f"station-{id(devices):x}"
+            if piezo_device is None:
+                assert config.pzt_simulator is not None
+                piezo_device = build_simulated_device(config.pzt_simulator)
+            stack.enter_context(attach_simulated_device(name, piezo_device))
+            settings = dataclasses.replace(settings, url=_piezo_url(settings.url, name))
+        piezo = build_piezo(settings)
+        stack.callback(piezo.close)
+        piezo.open(timeout_s=settings.timeout_s)
+        devices.piezo = piezo
+        devices.calibration = build_calibration(settings)
+
+    if config.plc is not None and config.outputs.enabled:
+        link_settings = config.plc.link
+        host, port = link_settings.host, link_settings.port
+        if link_settings.simulated:
+            simulator = PlcSimulator(config.plc.sim_layout(), config.plc.polishing_station(), port=0)
+            simulator.start()
+            stack.callback(simulator.stop)
+            host, port = simulator.host, simulator.port
+            devices.plc_simulator = simulator
+        link = PolishingLink(host, port, link_settings.register_map(), link_settings.link_timing())
+        stack.callback(link.close)
+        link.connect(timeout_s=max(timeout, link_settings.io_timeout_s * 4))
+        link.self_check(timeout_s=max(timeout, link_settings.io_timeout_s * 4))
+        devices.link = link
+    return devices
+
+
+def phase_steps_rad(config: StationConfig) -> tuple[float, ...]:
+    """The configured phase steps in radians."""
+    return tuple(math.radians(step) for step in config.processing.steps_deg)

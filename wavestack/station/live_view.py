@@ -1,0 +1,121 @@
+"""The terminal's live view: a few lines refreshed in place while the station runs.
+
+:class:`LiveStats` accumulates results (pure, testable); :func:`render_live_view` turns it into
+lines; the run command writes them with an ANSI "cursor up" so the block refreshes in place.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from wavestack.station.results import StationResult
+
+_TREND_THRESHOLD = 1e-3  # waves; smaller changes show as steady
+
+
+@dataclass(frozen=True)
+class LiveSnapshot:
+    """What the live view shows at one moment."""
+
+    results: int
+    valid: int
+    results_per_s: float
+    latency_p50_ms: float
+    latency_p99_ms: float
+    acquired: int
+    dropped: int
+    aperture: str
+    fitter: str
+    leading: tuple[tuple[int, float, float], ...]  # (index, value, change over the window), waves
+    truth_error_rms: float | None
+    last_reason: str | None
+
+
+class LiveStats:
+    """Rolling statistics over the last ``window`` results.
+
+    Parameters
+    ----------
+    window : int
+        Results kept for rates, percentiles and trends.
+    leading : int
+        How many leading coefficients to show (after piston and tilts).
+    """
+
+    def __init__(self, window: int = 100, leading: int = 6) -> None:
+        self._times_ns: deque[int] = deque(maxlen=window)
+        self._latencies: deque[float] = deque(maxlen=window)
+        self._coefficients: deque[tuple[float, ...]] = deque(maxlen=window)
+        self._leading = leading
+        self._count = 0
+        self._valid = 0
+        self._last: StationResult | None = None
+        self._last_reason: str | None = None
+
+    def add(self, result: StationResult, now_ns: int) -> None:
+        """Account for one result received at host time ``now_ns``."""
+        self._count += 1
+        self._times_ns.append(now_ns)
+        self._latencies.append(result.latency_ms)
+        if result.valid:
+            self._valid += 1
+            self._coefficients.append(result.coefficients)
+        else:
+            self._last_reason = result.reason
+        self._last = result
+
+    def snapshot(self) -> LiveSnapshot:
+        """The current view."""
+        last = self._last
+        rate = 0.0
+        if len(self._times_ns) >= 2 and self._times_ns[-1] > self._times_ns[0]:
+            rate = (len(self._times_ns) - 1) / ((self._times_ns[-1] - self._times_ns[0]) * 1e-9)
+        latencies = np.asarray(self._latencies) if self._latencies else np.asarray([math.nan])
+        leading: tuple[tuple[int, float, float], ...] = ()
+        if self._coefficients:
+            first, newest = self._coefficients[0], self._coefficients[-1]
+            shown = range(3, min(len(newest), 3 + self._leading))  # skip piston and tilts
+            leading = tuple((j + 1, newest[j], newest[j] - first[j]) for j in shown)
+        if last is None:
+            aperture, fitter = "-", "-"
+        else:
+            a = last.aperture
+            aperture = f"#{a.get('id', '-')} {a.get('topology', '-')}"  # topology names the pixel count
+            fitter = (last.fitter or "-") + (" (fallback, building)" if last.fitter_fallback else "")
+        return LiveSnapshot(
+            results=self._count, valid=self._valid, results_per_s=rate,
+            latency_p50_ms=float(np.nanpercentile(latencies, 50)) if np.isfinite(latencies).any() else math.nan,
+            latency_p99_ms=float(np.nanpercentile(latencies, 99)) if np.isfinite(latencies).any() else math.nan,
+            acquired=last.counters.acquired if last else 0, dropped=last.counters.dropped if last else 0,
+            aperture=aperture, fitter=fitter, leading=leading,
+            truth_error_rms=last.truth_error_rms if last else None, last_reason=self._last_reason,
+        )
+
+
+def _trend(change: float) -> str:
+    if abs(change) < _TREND_THRESHOLD:
+        return "="
+    return "+" if change > 0 else "-"
+
+
+def render_live_view(snapshot: LiveSnapshot, ordering: str) -> list[str]:
+    """Lines of the live view (no terminal control codes)."""
+    s = snapshot
+    lines = [
+        f"results {s.results} ({s.valid} valid)  {s.results_per_s:5.1f}/s  "
+        f"latency p50 {s.latency_p50_ms:6.1f} ms  p99 {s.latency_p99_ms:6.1f} ms",
+        f"frames acquired {s.acquired}  dropped {s.dropped}",
+        f"aperture {s.aperture}   fitter {s.fitter}",
+    ]
+    if s.leading:
+        terms = "  ".join(f"Z{j}={value:+.4f}{_trend(change)}" for j, value, change in s.leading)
+        lines.append(f"waves ({ordering}): {terms}")
+    if s.truth_error_rms is not None:
+        lines.append(f"error against the simulated truth: {s.truth_error_rms:.4f} waves rms")
+    if s.last_reason:
+        lines.append(f"last invalid: {s.last_reason}")
+    return lines

@@ -1,0 +1,87 @@
+"""What the station writes into a recording: one fixed-shape row per result, sets, apertures.
+
+A recording row has the same keys and shapes for every result, valid or not (an invalid result
+has NaN coefficients and ``-1`` frame ids), so the file's columns are declared when it is created
+and the file is crash-safe from its first flush.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from wavestack import __version__
+from wavestack.drivers.frames import Frame
+from wavestack.station.processing import ProcessedSet
+from wavestack.station.recording import RecordingWriter
+from wavestack.station.results import Counters, StationResult
+from wavestack.station.settings import StationConfig
+
+#: Numeric frame metadata the station records (the piezo tags of phase-stepped frames).
+FRAME_METADATA = ("pzt_commanded_v", "pzt_readback_v", "phase_step_rad")
+
+
+def recording_row(result: StationResult, modes: int, frames_per_set: int) -> dict[str, Any]:
+    """The fixed-shape row of one result."""
+    coefficients = np.full(modes, np.nan)
+    coefficients[: len(result.coefficients)] = result.coefficients
+    frame_ids = np.full(frames_per_set, -1, dtype=np.int64)
+    frame_ids[: len(result.frame_ids)] = result.frame_ids
+    output = result.output or {}
+    return {
+        "index": result.index, "valid": result.valid, "reason": result.reason or "",
+        "frame_ids": frame_ids, "exposure_time_ns": result.exposure_time_ns, "latency_ms": result.latency_ms,
+        "coefficients": coefficients, "residual_rms": result.residual_rms,
+        "fitter": result.fitter or "", "fitter_fallback": result.fitter_fallback,
+        "aperture_id": int(result.aperture.get("id", -1) if result.aperture.get("id") is not None else -1),
+        "aperture_changed": bool(result.aperture.get("changed", False)),
+        "unwrap_path": result.unwrap_path or "",
+        "truth_error_rms": np.nan if result.truth_error_rms is None else result.truth_error_rms,
+        "sent_to_plc": bool(output.get("sent", False)),
+    }
+
+
+def conventions(config: StationConfig) -> dict[str, str | float | int]:
+    """The conventions a reader needs to interpret the coefficients."""
+    p = config.processing
+    shack_hartmann = config.station.kind == "shack-hartmann"
+    return {"ordering": p.ordering, "normalisation": "rms", "coefficient_units": "waves of wavefront",
+            "first_index": 1, "wavelength_nm": config.station.wavelength_nm,
+            "method": "shack-hartmann" if shack_hartmann else p.method,
+            "fit_method": "modal" if shack_hartmann else p.fit_method, "remove": p.remove, "modes": p.modes}
+
+
+def open_recording(path: str, config: StationConfig, frame_shape: tuple[int, int], frame_dtype: Any,
+                   *, overwrite: bool = False) -> RecordingWriter:
+    """A recording for this station, its columns declared up front."""
+    fps = config.processing.frames_per_set
+    template = recording_row(StationResult(
+        index=0, frame_ids=(), exposure_time_ns=0, latency_ms=0.0, valid=False, reason=None, coefficients=(),
+        ordering="", normalisation="", units="", residual_rms=0.0, fitter=None, fitter_fallback=False,
+        fitter_diagnostics={}, aperture={}, unwrap_path=None,
+        counters=Counters(0, 0, 0)),
+        config.processing.modes, fps)
+    return RecordingWriter(path, config_toml=config.text, conventions=conventions(config),
+                           software_version=__version__, frame_shape=frame_shape, frame_dtype=frame_dtype,
+                           frames_per_set=fps, overwrite=overwrite, metadata_keys=FRAME_METADATA,
+                           result_template=template)
+
+
+class StationRecorder:
+    """Appends each result, its set and any new aperture to a :class:`RecordingWriter`."""
+
+    def __init__(self, writer: RecordingWriter, config: StationConfig) -> None:
+        self._writer = writer
+        self._modes = config.processing.modes
+        self._fps = config.processing.frames_per_set
+
+    def __call__(self, result: StationResult, frames: tuple[Frame, ...], processed: ProcessedSet) -> None:
+        if frames:
+            self._writer.append_set(result.index, frames)
+            if processed.aperture_changed and processed.aperture is not None:
+                self._writer.append_aperture(result.index, processed.aperture.mask)
+        self._writer.append_result(recording_row(result, self._modes, self._fps))
+
+    def close(self) -> None:
+        self._writer.close()
