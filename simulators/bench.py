@@ -9,6 +9,7 @@ the test optic at the camera's device time.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,11 +38,40 @@ class PiezoCoupling:
 
 @dataclass(frozen=True, eq=False)
 class FrameTruth:
-    """Ground truth kept by the simulated camera for each block id."""
+    """Ground truth kept by the simulated camera for each block id.
 
-    optic: OpticTruth | Any
+    The optic's truth (a full wavefront map, 8 MB at 1024 x 1024) is not kept per frame: the
+    camera keeps the truth of its last 64 frames, and holding 64 maps cost half a gigabyte. It is
+    recomputed on request from the frame's time, which gives the same map as long as the optic's
+    aperture has not changed since; after a change :attr:`optic` is None (unknown, never wrong).
+
+    Attributes
+    ----------
+    time_s : float
+        The optic's time of the frame (drift), seconds.
+    pzt_voltage_v : float or None
+        The simulated piezo's output when the frame was rendered.
+    phase_shift_rad : float
+        The phase shift the piezo produced, radians.
+    aperture_revision : int
+        The optic's aperture revision when the frame was rendered.
+    """
+
+    time_s: float
     pzt_voltage_v: float | None
     phase_shift_rad: float
+    aperture_revision: int
+    source: TestOptic
+    carrier_cycles: tuple[float, float] = (0.0, 0.0)
+    vibration_rad: float = 0.0
+
+    @property
+    def optic(self) -> OpticTruth | None:
+        """The optic's truth as rendered in this frame (None if its aperture changed since)."""
+        if self.source.aperture_revision != self.aperture_revision:
+            return None
+        return dataclasses.replace(self.source.truth(self.time_s), phase_shift_rad=self.phase_shift_rad,
+                                   vibration_rad=self.vibration_rad, carrier_cycles=self.carrier_cycles)
 
 
 class SimulatedInterferometer:
@@ -72,8 +102,10 @@ class SimulatedInterferometer:
     def _render(self, block_id: int, device_time_ns: int, exposure_us: float) -> tuple[NDArray[Any], FrameTruth]:
         volts = None if self.piezo is None else self.piezo.voltage(self.coupling.axis)
         shift = 0.0 if volts is None else volts * self.coupling.radians_per_volt
-        pixels, truth = self.optic.interferogram(device_time_ns * 1e-9, shift)
-        return pixels, FrameTruth(truth, volts, shift)
+        time_s = device_time_ns * 1e-9
+        pixels, truth = self.optic.interferogram(time_s, shift)
+        return pixels, FrameTruth(time_s, volts, shift, truth.aperture_revision, self.optic,
+                                  truth.carrier_cycles, truth.vibration_rad)
 
 
 class SimulatedShackHartmann:

@@ -22,6 +22,9 @@ of the real station on its simulated devices measures:
 
 Nothing is asserted: the figures are printed beside the targets with a pass/miss mark (the
 machine may be shared and noisy; the load average at the start is printed).
+
+The CPU accounting lives in :mod:`wavestack.bench_station_cpu`; the figures, the targets and their
+text and JSON forms in :mod:`wavestack.bench_station_figures` (re-exported here).
 """
 
 from __future__ import annotations
@@ -32,16 +35,28 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.arguments import positive_int
+from wavestack.bench_station_cpu import F, _instrument, _Mark, _mark, _Meter, _per_result_ms  # F re-exported
+from wavestack.bench_station_figures import (  # re-exported: importable from here as before the split
+    STAGES,
+    TARGET_NEW_MAP_S,
+    TARGET_OVERHEAD,
+    TARGET_P99_MS,
+    TARGET_RESULTS_PER_S,
+    StationPathFigures,
+    _json_ready,
+    _targets,
+    format_figures,
+)
 from wavestack.drivers.errors import DeviceError
 from wavestack.drivers.frames import Frame
 from wavestack.simulators.optic import ApertureShape
@@ -53,74 +68,11 @@ from wavestack.station.station import Station
 
 logger = logging.getLogger(__name__)
 
-STAGES = ("phase", "aperture", "unwrap", "fit")
 CARRIER_CYCLES_1024 = (60.0, 35.0)  # tilt fringes across a 1024-pixel frame; scaled to the frame size
-TARGET_RESULTS_PER_S = 20.0  # carrier path
-TARGET_P99_MS = 150.0  # carrier path
-TARGET_NEW_MAP_S = 1.0
-TARGET_OVERHEAD = 1.5
 WARMUP_EXTRA = 2  # results on the configured fitter before the measurement starts
 RECORDED_SETS = 8  # sets kept for the stage benchmark (a 1024 x 1024 five-frame set is 10 MB)
 WARMUP_LIMIT_S = 90.0
 CHANGE_LIMIT_S = 30.0
-
-F = TypeVar("F", bound=Callable[..., Any])
-
-
-@dataclass(frozen=True)
-class StationPathFigures:
-    """What one path measured; ``*_ms`` are milliseconds per result, ``*_s`` seconds.
-
-    ``path`` ("carrier" or "psi") and ``description`` (method, frame, carrier or steps, fitter)
-    name it. ``results`` were measured after ``warmup_results`` (``warmup_s``) until the
-    configured fitter of the first aperture was in use. ``results_per_s`` over the measured
-    results, ``per_result_ms = 1000 / results_per_s``, latency percentiles from the first frame's
-    arrival. ``stage_ms`` / ``stage_median_ms``: mean / median per stage in the station;
-    ``alone_stage_ms``: mean per stage of ``SetProcessor.process`` alone (``alone_runs`` calls,
-    ``alone_process_ms`` per call); ``overhead_ratio = per_result_ms / sum(alone_stage_ms)``;
-    ``outside_stages_ms = per_result_ms - sum(stage_ms)`` (truth comparison, PLC, waiting for a
-    set), of which ``plc_io_ms`` (wall time in the PLC link's calls, ``plc_requests_per_result``
-    Modbus requests).
-    ``process_cpu_ms``: process CPU per result; ``simulator_cpu_ms``: ``camera`` (USB backend
-    transfers, render included), ``render`` (the optic alone), ``piezo``, ``plc``;
-    ``simulator_share = (camera + piezo + plc) / process_cpu_ms``; ``thread_cpu_ms``: per thread
-    role ("native pools" are threads Python did not start: BLAS, OpenCV). ``set_arrival_ms``:
-    median first-to-last frame arrival of a set (0 for carrier). ``frames_acquired`` /
-    ``frames_dropped`` over the measured window. Aperture change: ``aperture_set_s`` (the
-    simulator's own ``set_aperture``, not counted), ``aperture_detect_s`` and
-    ``aperture_new_map_s`` from the change (None: not within the limit), and the number of
-    ``aperture_changes`` the station reported (1 expected).
-    """
-
-    path: str
-    description: str
-    results: int
-    warmup_results: int
-    warmup_s: float
-    results_per_s: float
-    per_result_ms: float
-    latency_p50_ms: float
-    latency_p99_ms: float
-    stage_ms: dict[str, float]
-    outside_stages_ms: float
-    plc_io_ms: float
-    plc_requests_per_result: float
-    stage_median_ms: dict[str, float]
-    alone_stage_ms: dict[str, float]
-    alone_process_ms: float
-    alone_runs: int
-    overhead_ratio: float
-    process_cpu_ms: float
-    simulator_cpu_ms: dict[str, float]
-    simulator_share: float
-    thread_cpu_ms: dict[str, float]
-    set_arrival_ms: float
-    frames_acquired: int
-    frames_dropped: int
-    aperture_set_s: float | None
-    aperture_detect_s: float | None
-    aperture_new_map_s: float | None
-    aperture_changes: int
 
 
 def add_station_bench_arguments(parser: argparse.ArgumentParser, *, json_option: bool = True) -> None:
@@ -187,92 +139,6 @@ def changed_aperture(width: int, height: int) -> ApertureShape:
     """The aperture the optic is switched to mid-run: a tilted ellipse, nothing like the annulus."""
     return ApertureShape(kind="ellipse", centre_px=(0.5 * width, 0.5 * height),
                          semi_axes_px=(0.40 * width, 0.30 * height), rotation_deg=25.0)
-
-
-# ---------------------------------------------------------------------------------- CPU time
-
-
-class _Meter:
-    """Time spent inside wrapped callables, summed by key, on ``clock`` (thread CPU or wall time)."""
-
-    def __init__(self, clock: Callable[[], float]) -> None:
-        self._clock = clock
-        self._lock = threading.Lock()
-        self._totals: dict[str, float] = {}
-
-    def wrap(self, key: str, function: F) -> F:
-        def timed(*args: Any, **kwargs: Any) -> Any:
-            start = self._clock()
-            try:
-                return function(*args, **kwargs)
-            finally:
-                spent = self._clock() - start
-                with self._lock:
-                    self._totals[key] = self._totals.get(key, 0.0) + spent
-        return timed  # type: ignore[return-value]
-
-    def snapshot(self) -> dict[str, float]:
-        with self._lock:
-            return dict(self._totals)
-
-
-def _instrument(devices: StationDevices, cpu: _Meter, wall: _Meter) -> None:
-    """Wrap the simulated devices' entry points (CPU) and the PLC link's calls (wall), these instances only."""
-    bench = devices.bench
-    assert bench is not None
-    backend = bench.backend
-    backend.bulk_read = cpu.wrap("camera", backend.bulk_read)  # type: ignore[method-assign]
-    backend.bulk_write = cpu.wrap("camera", backend.bulk_write)  # type: ignore[method-assign]
-    bench.optic.interferogram = cpu.wrap("render", bench.optic.interferogram)  # type: ignore[method-assign]
-    if bench.piezo is not None:
-        bench.piezo.feed = cpu.wrap("piezo", bench.piezo.feed)  # type: ignore[method-assign]
-    if devices.link is not None:
-        for name in ("heartbeat", "send_removal", "read_status", "rearm"):
-            setattr(devices.link, name, wall.wrap("plc", getattr(devices.link, name)))
-
-
-_THREAD_ROLES = (("MainThread", "pipeline"), ("u3v-reader", "camera reader"), ("phase-step", "phase stepping"),
-                 ("plc-simulator", "plc"), ("fitter-build", "fitter build"))
-
-
-def _thread_cpu_s() -> dict[str, float]:
-    """CPU seconds (user + system) of every thread of the process by role (Linux ``/proc``; else empty)."""
-    ticks = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-    roles = {thread.native_id: next((r for prefix, r in _THREAD_ROLES if thread.name.startswith(prefix)), "other")
-             for thread in threading.enumerate()}
-    found: dict[str, float] = {}
-    try:
-        tasks = os.listdir("/proc/self/task")
-    except OSError:
-        return found
-    for task in tasks:
-        try:
-            with open(f"/proc/self/task/{task}/stat", "rb") as stat:
-                fields = stat.read().rsplit(b")", 1)[1].split()
-        except (OSError, IndexError):  # the thread ended meanwhile
-            continue
-        role = roles.get(int(task), "native pools")
-        found[role] = found.get(role, 0.0) + (int(fields[11]) + int(fields[12])) / ticks  # utime, stime
-    return found
-
-
-@dataclass(frozen=True)
-class _Mark:
-    wall_s: float
-    process_s: float
-    simulators: dict[str, float]
-    threads: dict[str, float]
-    io_wall: dict[str, float]
-    plc_requests: int
-
-
-def _mark(devices: StationDevices, cpu: _Meter, wall: _Meter) -> _Mark:
-    requests = devices.plc_simulator.request_count if devices.plc_simulator is not None else 0
-    return _Mark(time.perf_counter(), time.process_time(), cpu.snapshot(), _thread_cpu_s(), wall.snapshot(), requests)
-
-
-def _per_result_ms(start: dict[str, float], end: dict[str, float], results: int) -> dict[str, float]:
-    return {key: (value - start.get(key, 0.0)) * 1e3 / results for key, value in sorted(end.items())}
 
 
 # ---------------------------------------------------------------------------------- the run
@@ -435,74 +301,3 @@ def measure_path(name: str, config: StationConfig, results: int) -> StationPathF
         aperture_set_s=run.set_aperture_s, aperture_detect_s=run.detect_s, aperture_new_map_s=run.new_map_s,
         aperture_changes=run.changes,
     )
-
-
-# ---------------------------------------------------------------------------------- output
-
-
-def _targets() -> dict[str, float]:
-    return {"carrier_results_per_s_min": TARGET_RESULTS_PER_S, "carrier_latency_p99_ms_max": TARGET_P99_MS,
-            "aperture_new_map_s_max": TARGET_NEW_MAP_S, "overhead_ratio_max": TARGET_OVERHEAD}
-
-
-def _json_ready(value: Any) -> Any:
-    if isinstance(value, float):
-        return value if np.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: _json_ready(v) for k, v in value.items()}
-    return value
-
-
-def _target(text: str, ok: bool) -> str:
-    return f"target {text}: {'pass' if ok else 'MISS'}"
-
-
-def _seconds(value: float | None) -> str:
-    return "not within the limit" if value is None else f"{value:.2f} s"
-
-
-def format_figures(source: str, figures: Sequence[StationPathFigures],
-                   machine: dict[str, Any] | None = None) -> list[str]:
-    """The figures as text lines, targets beside them (``machine``: see :func:`machine_state`)."""
-    lines = [f"wavestack bench station: {source}"]
-    if machine is not None:
-        lines.append(f"machine: {machine['cpus']} CPUs, load average {machine['load_average_1min']:.2f} at the "
-                     f"start, OPENBLAS_NUM_THREADS={machine['openblas_num_threads']}")
-    row = "{:<24}{:<48}{}".format
-    for f in figures:
-        carrier = f.path == "carrier"
-        new_map_ok = f.aperture_new_map_s is not None and f.aperture_new_map_s <= TARGET_NEW_MAP_S
-        lines += [
-            "", f"== {f.path} path: {f.description}",
-            f"   {f.results} results measured after a warm-up of {f.warmup_results} results ({f.warmup_s:.1f} s, "
-            "until the configured fitter was in use); stage times are over the same results",
-            row("results/s", f"{f.results_per_s:.1f}",
-                _target(f">= {TARGET_RESULTS_PER_S:g}", f.results_per_s >= TARGET_RESULTS_PER_S) if carrier else ""),
-            row("latency p50 / p99", f"{f.latency_p50_ms:.0f} / {f.latency_p99_ms:.0f} ms",
-                _target(f"p99 <= {TARGET_P99_MS:g} ms", f.latency_p99_ms <= TARGET_P99_MS) if carrier else ""),
-            row("per-result time", f"{f.per_result_ms:.1f} ms (1 / rate)", ""),
-            row("set arrival", f"{f.set_arrival_ms:.1f} ms (first to last frame of a set, median)", ""),
-            row("stage ms", "station mean / median | alone mean", ""),
-            *(row(f"  {stage}", f"{f.stage_ms[stage]:.1f} / {f.stage_median_ms[stage]:.1f} | "
-                                f"{f.alone_stage_ms[stage]:.1f}", "") for stage in STAGES),
-            row("  sum of stages", f"{sum(f.stage_ms.values()):.1f} | {sum(f.alone_stage_ms.values()):.1f} "
-                                   f"(alone: {f.alone_runs} runs on recorded sets)", ""),
-            row("  process() alone", f"{f.alone_process_ms:.1f} ms per call", ""),
-            row("outside the stages", f"{f.outside_stages_ms:.1f} ms per result (truth comparison, PLC, "
-                                      "waiting for a set)", ""),
-            row("  PLC I/O", f"{f.plc_io_ms:.1f} ms per result, {f.plc_requests_per_result:.1f} Modbus requests", ""),
-            row("hidden overhead", f"{f.overhead_ratio:.2f} x (per-result time / alone stage sum)",
-                _target(f"<= {TARGET_OVERHEAD:g}", f.overhead_ratio <= TARGET_OVERHEAD)),
-            row("process CPU", f"{f.process_cpu_ms:.1f} ms per result "
-                               f"({f.process_cpu_ms / f.per_result_ms:.2f} cores busy)", ""),
-            row("simulator share", f"{100 * f.simulator_share:.0f} % of the process CPU", ""),
-            "   simulator CPU ms per result (thread CPU inside the simulated devices; camera = USB transfers "
-            "incl. render): " + ", ".join(f"{k} {v:.1f}" for k, v in f.simulator_cpu_ms.items()),
-            "   CPU ms per result by thread: " + ", ".join(f"{k} {v:.1f}" for k, v in f.thread_cpu_ms.items()),
-            row("frames", f"{f.frames_acquired} acquired, {f.frames_dropped} dropped", ""),
-            row("aperture change", f"detected {_seconds(f.aperture_detect_s)}, new map "
-                                   f"{_seconds(f.aperture_new_map_s)}", _target(f"<= {TARGET_NEW_MAP_S:g} s", new_map_ok)),
-            f"   (the optic's own set_aperture took {_seconds(f.aperture_set_s)}, not counted; aperture changes "
-            f"reported: {f.aperture_changes})",
-        ]
-    return lines

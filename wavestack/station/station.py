@@ -244,8 +244,11 @@ class Station:
             return None, None
         assert isinstance(self.processor, SetProcessor)  # a FitterChoice comes only from a SetProcessor
         fitter = processed.choice.fitter
+        optic = truth.optic
+        if optic is None:  # the optic's aperture changed after this frame: its truth is gone
+            return None, None
         try:
-            true_fit = self.processor.fit_map(truth.optic.wavefront_waves, processed.choice)
+            true_fit = self.processor.fit_map(optic.wavefront_waves, processed.choice)
         except InvalidFrame as error:  # the optic's aperture changed within the set: nothing to compare
             logger.debug("no truth comparison: %s", error)
             return None, None
