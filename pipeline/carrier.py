@@ -27,11 +27,25 @@ Subtract a smooth background (a Gaussian low-pass at half the longest fringe per
 for, computed inside the mask when one is given), taper the frame (or the mask) edge smoothly to
 zero, take the real FFT, find the highest local peak beyond a minimum radius in the half-plane
 above, check that it stands clearly above the spectrum on its ring, refine it to a small
-fraction of a bin by the power centroid of the sideband, crop a window of radius ``|f| / 2``
-around it, shift it to DC (integer part of the carrier) and inverse-transform
-only that crop: along y for its few non-zero spectral columns, then along x zero-padded to full size
-(exact band-limited interpolation); the sub-bin remainder of the carrier is removed by a
-conjugate ramp.
+fraction of a bin by the power centroid of the sideband, crop the sideband (below), shift it to
+DC (integer part of the carrier) and inverse-transform only that crop: along y for its few
+non-zero spectral columns, then along x zero-padded to full size (exact band-limited
+interpolation); the sub-bin remainder of the carrier is removed by a conjugate ramp.
+
+The sideband crop
+-----------------
+The only other lobes of ``A + B cos(...)`` are the background at DC and the conjugate sideband
+at ``-f`` (and their aliases one sampling frequency away). The crop takes every frequency that
+is nearer the carrier than any of them, up to ``|f|`` from the carrier: towards DC it stops
+half-way (``|f| / 2``, the classical limit, below which a sideband cannot be told from the
+background), across the fringes and away from DC it reaches ``|f|``. A circle of radius
+``|f| / 2`` would be needlessly narrow there: the local fringe frequency of a wavefront with a
+few waves of defocus or astigmatism moves across the carrier by more than ``|f| / 2`` on small
+frames (about 35 fringes on 256 px), and the part of the sideband cut off leaves near-zero
+modulation, phase singularities and unwrapping errors that take the low orders with them. The
+window is applied in the normalised distance ``rho`` (0 at the carrier, 1 on the crop boundary:
+the larger of ``|k - f| / |f|`` and, for each other lobe ``c``, the offset towards ``c``
+over half the distance to it).
 """
 
 from __future__ import annotations
@@ -53,6 +67,7 @@ _MIN_RELATIVE_RMS = 1e-5  # background-removed frame RMS / max |frame| below whi
 _CENTROID_STEPS = 6  # iterations of the power-centroid refinement of the carrier
 _CENTROID_FLOOR = 0.01  # power below this fraction of the sideband peak is ignored by the centroid
 _MIN_SIDE = 16  # px: smallest frame side accepted
+_CROP_REACH = 1.0  # sideband crop radius in units of |f| where no other lobe is nearer (docstring)
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,7 +81,8 @@ class CarrierResult:
         module docstring. Meaningless where ``modulation`` is ~0 (outside the mask or fringes).
     modulation : ndarray of float32, shape (rows, cols)
         ``2 |sideband|``: the fringe amplitude ``B`` in intensity units (lowered near the
-        tapered edges of the frame or mask), directly comparable to the PSI modulation.
+        tapered edges of the frame or mask, and by the window where the local fringe frequency
+        is far from the carrier), directly comparable to the PSI modulation.
     carrier : tuple of float
         ``(fx, fy)`` in cycles per pixel, x = col and y = -row (y up).
     window : str
@@ -191,7 +207,7 @@ def _spectrum_block(
 
 
 def _window(name: str, rho: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Radial spectral window, 1 at ``rho = 0`` and 0 for ``rho >= 1``."""
+    """Spectral window over the crop's normalised distance: 1 at ``rho = 0``, 0 for ``rho >= 1``."""
     inside = rho < 1.0
     if name == "rect":
         return inside.astype(np.float64)
@@ -200,6 +216,36 @@ def _window(name: str, rho: NDArray[np.float64]) -> NDArray[np.float64]:
     # Tukey with a flat top over half the radius and a cosine edge over the other half
     edge = np.clip(2.0 * rho - 1.0, 0.0, 1.0)
     return np.where(inside, np.cos(0.5 * np.pi * edge) ** 2, 0.0)
+
+
+def _crop_rho(offsets: tuple[NDArray, NDArray], carrier_rc: tuple[float, float]) -> NDArray[np.float64]:
+    """Normalised distance from the carrier: 0 there, 1 on the boundary of the sideband crop.
+
+    ``offsets`` are (row, col) frequency offsets from the carrier in cycles/px (broadcastable).
+    The crop is the set of frequencies within ``_CROP_REACH * |f|`` of the carrier that are
+    nearer the carrier than DC, the conjugate sideband ``-f`` and their aliases by one sampling
+    frequency (a Voronoi cell of the fringe spectrum's lobes). Towards each such lobe ``c``,
+    ``rho`` is the offset along ``c - f`` over half the distance ``|c - f|``.
+    """
+    carrier = np.array(carrier_rc, dtype=np.float64)
+    rho = np.hypot(*offsets) / (_CROP_REACH * math.hypot(*carrier_rc))
+    for alias in ((i, j) for i in (-1.0, 0.0, 1.0) for j in (-1.0, 0.0, 1.0)):
+        for lobe in (np.array(alias), np.array(alias) - carrier):
+            towards = lobe - carrier
+            distance = math.hypot(*towards)
+            if distance > 1e-9:  # a lobe on the carrier (an alias of f itself) is no boundary
+                along = (offsets[0] * towards[0] + offsets[1] * towards[1]) / distance
+                rho = np.maximum(rho, along / (0.5 * distance))
+    return rho
+
+
+def _crop_half(carrier_rc: tuple[float, float], shape: tuple[int, int]) -> tuple[int, int]:
+    """Half sizes (rows, cols) in bins of the block holding the crop, each bin at most once."""
+    reach = _CROP_REACH * math.hypot(*carrier_rc)
+    return (
+        max(1, min(math.ceil(reach * shape[0]), (shape[0] - 1) // 2)),
+        max(1, min(math.ceil(reach * shape[1]), (shape[1] - 1) // 2)),
+    )
 
 
 def _find_carrier(
@@ -213,7 +259,7 @@ def _find_carrier(
     its own ring (same radius, +-10 %) in the sectors within 45 degrees of the perpendicular
     direction: closed fringes, noise or a smooth background fill the ring evenly and fail, a
     carrier sideband does not. The peak is then refined by the centroid of the sideband power
-    within radius ``|f| / 2`` (:func:`_refine_carrier`).
+    within the sideband crop (:func:`_refine_carrier`).
     """
     rows, cols = shape
     dc_row = rows // 2  # row of DC once the rows are fft-shifted
@@ -250,7 +296,7 @@ def _find_carrier(
             f"cycles/px); the best peak is {ratio:.3g}x, at {peak_radius:.4g} cycles/px"
         )
     noise_power = float(np.median(magnitude[box][ring].astype(np.float64) ** 2))
-    return _refine_carrier(spectrum, shape, peak, 0.5 * peak_radius, noise_power)
+    return _refine_carrier(spectrum, shape, peak, noise_power)
 
 
 def _frequencies(box: tuple[slice, slice], shape: tuple[int, int]) -> tuple[NDArray, NDArray]:
@@ -262,26 +308,31 @@ def _frequencies(box: tuple[slice, slice], shape: tuple[int, int]) -> tuple[NDAr
 
 
 def _refine_carrier(
-    spectrum: NDArray[np.complex64], shape: tuple[int, int], start: tuple[float, float],
-    radius: float, noise_power: float,
+    spectrum: NDArray[np.complex64],
+    shape: tuple[int, int],
+    start: tuple[float, float],
+    noise_power: float,
 ) -> tuple[float, float]:
-    """Power centroid of the sideband within ``radius`` (cycles/px) of the current estimate.
+    """Power centroid of the sideband within its crop (:func:`_crop_rho`) around the estimate.
 
     The centroid of ``|F|^2`` over a sideband is the carrier plus the modulation-weighted mean
-    phase gradient / 2 pi; recentring the window until it stops moving makes it symmetric about
-    the estimate. A floor (the larger of the noise level and 1 % of the peak power) is subtracted
-    first, so that neither noise nor the tail of the background spectrum reaching into the window
-    (strong when a bright pupil on a dark field is not masked) pulls the centroid.
+    phase gradient / 2 pi; recentring the crop until it stops moving makes it symmetric about
+    the estimate. The whole crop counts: a sideband spread across the carrier beyond the crop
+    would leave the centroid wherever it started along that spread. A floor (the larger of the
+    noise level and 1 % of the peak power) is subtracted first, so that neither noise nor the
+    tail of the background spectrum reaching into the crop (strong when a bright pupil on a dark
+    field is not masked) pulls the centroid.
     """
     rows, cols = shape
     estimate = (start[0] * rows, start[1] * cols)  # bins
-    half = (max(1, math.ceil(radius * rows)), max(1, math.ceil(radius * cols)))
     for _ in range(_CENTROID_STEPS):
+        current = (estimate[0] / rows, estimate[1] / cols)
+        half = _crop_half(current, shape)
         centre = (round(estimate[0]), round(estimate[1]))
         block = _spectrum_block(spectrum, shape, centre, half)
         dv = centre[0] + np.arange(-half[0], half[0] + 1)[:, None]
         du = centre[1] + np.arange(-half[1], half[1] + 1)[None, :]
-        rho = np.hypot((dv - estimate[0]) / (radius * rows), (du - estimate[1]) / (radius * cols))
+        rho = _crop_rho(((dv - estimate[0]) / rows, (du - estimate[1]) / cols), current)
         power = np.where(rho < 1.0, np.abs(block).astype(np.float64) ** 2, 0.0)
         power -= max(noise_power, _CENTROID_FLOOR * float(power.max()))
         np.clip(power, 0.0, None, out=power)
@@ -301,25 +352,22 @@ def _sideband_field(
 ) -> NDArray[np.complex64]:
     """Complex field ``2 (B/2) e^{i phi}`` (so ``|.| = B``) at full size, carrier removed.
 
-    Only the crop of radius ``|f| / 2`` around the carrier is transformed: it is moved to DC
+    Only the sideband crop (:func:`_crop_rho`) is transformed: it is moved to DC
     (integer part of the carrier), inverse-transformed along y for its ``2 h + 1`` non-zero
     spectral columns only, then along x zero-padded to the full width (exact band-limited
     interpolation to full size, about half the work of a full 2-D inverse FFT). The sub-bin
     remainder of the carrier is removed by a conjugate ramp after each pass.
     """
     rows, cols = shape
-    radius = 0.5 * math.hypot(*carrier_rc)  # window radius, cycles/px
     exact = (carrier_rc[0] * rows, carrier_rc[1] * cols)  # carrier in bins
     centre = (round(exact[0]), round(exact[1]))
     residual = (exact[0] - centre[0], exact[1] - centre[1])
-    radius_bins = (radius * rows, radius * cols)
-    half = (math.ceil(radius_bins[0]), math.ceil(radius_bins[1]))
+    half = _crop_half(carrier_rc, shape)
     block = _spectrum_block(spectrum, shape, centre, half)
     dv = np.arange(-half[0], half[0] + 1)
     du = np.arange(-half[1], half[1] + 1)
-    rho = np.hypot(
-        (dv[:, None] - residual[0]) / radius_bins[0], (du[None, :] - residual[1]) / radius_bins[1]
-    )
+    offsets = ((dv[:, None] - residual[0]) / rows, (du[None, :] - residual[1]) / cols)  # cycles/px
+    rho = _crop_rho(offsets, carrier_rc)
     weights = (_window(window, rho) * (2.0 / (rows * cols))).astype(np.float32)
     # pass 1, along y, for the non-zero spectral columns only; then the y part of the sub-bin ramp
     partial = np.zeros((rows, du.size), dtype=np.complex64)
@@ -361,8 +409,9 @@ def carrier_phase(
         refinement); it also selects which of the two sidebands is demodulated. Default: found
         from the data (module docstring).
     window : {"hann", "tukey", "rect"}
-        Radial window over the sideband crop of radius ``|f| / 2``: Hann (cos^2), Tukey (flat over
-        half the radius, cos^2 edge) or rectangular.
+        Window over the sideband crop (up to ``|f|`` from the carrier, half-way towards DC; see
+        the module docstring), in its normalised distance: Hann (cos^2), Tukey (flat over half
+        the distance, cos^2 edge) or rectangular.
     sign : {+1, -1}
         -1 negates the phase and the reported carrier (the other sideband convention); a single
         carrier frame cannot tell ``phi`` from ``-phi`` without knowing the tilt direction.

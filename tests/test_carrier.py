@@ -4,13 +4,14 @@ Synthetic frames are I = A + B cos(phi + 2 pi (fx x + fy y)) with x = col, y = -
 disk of radius 0.42 * side (dark speckle-free surround), phi a sum of defocus, astigmatism and
 spherical aberration (even in x and y, so phi has no mean tilt and the carrier is unambiguous).
 
-Tolerances: the sideband window of radius |f| / 2 limits the spatial resolution to about 2 / |f|
-px, so errors concentrate within that distance of the aperture edge; phase errors are taken
-inside 0.85 of the disk radius (an edge margin of 32 px on 512 px frames, >= 3 resolution
-lengths) after removing the mean offset. Noise-free RMS errors measured there are 0.006-0.017 rad
-unmasked and 0.006-0.011 rad masked (the finite window smooths the curved fringes, and a carrier
-error of 2e-5 cycles/px leaves 0.05 rad of tilt across the disk), so 0.03 rad is the bound;
-carrier estimates are within 2.5e-5 cycles/px of the truth, bound 1e-3 as specified.
+Tolerances: the sideband crop reaches |f| / 2 towards DC (|f| across the fringes), which limits
+the spatial resolution to about 2 / |f| px, so errors concentrate within that distance of the
+aperture edge; phase errors are taken inside 0.85 of the disk radius (an edge margin of 32 px on
+512 px frames, >= 3 resolution lengths) after removing the mean offset. Noise-free RMS errors
+measured there are 0.006-0.014 rad unmasked and 0.003-0.010 rad masked (the finite window smooths
+the curved fringes, and a carrier error of 2e-5 cycles/px leaves 0.05 rad of tilt across the
+disk), so 0.03 rad is the bound; carrier estimates are within 2.5e-5 cycles/px of the truth,
+bound 1e-3 as specified.
 """
 
 from __future__ import annotations
@@ -20,9 +21,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from numpy.typing import NDArray
 
-from wavestack.pipeline.carrier import CarrierResult, carrier_phase
+from wavestack.pipeline.carrier import CarrierResult, _crop_rho, carrier_phase
 from wavestack.pipeline.psi import four_step
 
 PSI = Path("/work/shared/data/psi-mirror-654nm")
@@ -89,8 +92,9 @@ def test_recovers_phase_and_carrier(carrier: tuple[float, float], masked: bool) 
 
 
 def test_noise_raises_the_error_only_moderately() -> None:
-    # sigma 10 on B = 60: the window passes about pi (|f|/2)^2 of the spectrum, so the phase
-    # noise is about sigma / B * sqrt(2 pi (|f| / 2)^2) ~ 0.02 rad; measured 0.014 rad in total
+    # sigma 10 on B = 60: the Hann-weighted crop passes an effective area of about |f|^2 of the
+    # spectrum, so the phase noise is about sigma / B * sqrt(2 |f|^2) ~ 0.02 rad; measured
+    # 0.019 rad in total (0.014 rad with the former circular crop of radius |f| / 2)
     result = carrier_phase(_frame((0.09, 0.04), noise=10.0, seed=1))
     assert np.abs(np.subtract(result.carrier, (0.09, 0.04))).max() < 1e-3
     assert _error(result, _phase(), _inner()) < 0.05
@@ -153,6 +157,65 @@ def test_positive_tilt_in_phi_moves_the_carrier_estimate_not_the_sign() -> None:
     result = carrier_phase(_frame((0.08, 0.04), tilted))
     np.testing.assert_allclose(result.carrier, (0.09, 0.04), atol=1e-3)
     assert _error(result, _phase(), _inner()) < 0.03
+
+
+@pytest.mark.parametrize("cycles", [(30.0, 18.0), (35.0, 0.0), (18.0, -30.0)])
+def test_a_sideband_wider_than_half_the_carrier_across_it_is_kept(cycles: tuple[float, float]) -> None:
+    """Small frame (256 px, about 35 fringes): a cylinder of phase across the fringes moves the
+    local fringe frequency up to 0.7 |f| away from the carrier, perpendicular to it (never towards
+    DC). A crop of radius |f| / 2 cuts that part of the sideband off: the modulation there drops
+    to ~0 and the phase breaks up (measured 0.62 rad RMS). Only the half-way line to DC (and to
+    the conjugate sideband) limits the crop; across the carrier it may reach further."""
+    size = 256
+    carrier = (cycles[0] / size, cycles[1] / size)
+    x, y, _, _, r2 = _geometry(size)
+    x, y = x - (size - 1) / 2, y + (size - 1) / 2  # from the disk centre, px (y up)
+    radius = 0.42 * size
+    magnitude = float(np.hypot(*carrier))
+    across = (x * -carrier[1] + y * carrier[0]) / magnitude  # px, perpendicular to the fringes
+    chirp = 0.7 * magnitude / radius  # local frequency offset per px across, cycles/px^2
+    truth = np.pi * chirp * across**2  # radians: 2 pi * integral of (chirp * across)
+    result = carrier_phase(_frame(carrier, truth))
+    # phi is even across the carrier: no mean tilt, so the estimate is the carrier itself.
+    # Measured within 0.025 bins (1e-4 cycles/px; 0.23-0.59 bins when the centroid only saw a
+    # circle of radius |f| / 2 of this spread sideband); bound 3e-4 cycles/px.
+    assert np.abs(np.subtract(result.carrier, carrier)).max() < 3e-4
+    inner = r2 <= 0.85**2
+    # every local fringe frequency inside the disk passes the window: no modulation drop-out
+    # (measured >= 0.35 B, the Hann weight at 0.6 |f|; 0.01 B with the |f| / 2 crop)
+    assert result.modulation[inner].min() > 0.2 * 60.0
+    # low orders: piston and the tilt of the (small) residual carrier error taken out, as a
+    # Zernike fit with PTT removal does. Measured 0.008 rad RMS (0.62 rad with the |f| / 2
+    # crop); bound 0.03 rad as for the other noise-free frames.
+    offset = np.subtract(result.carrier, carrier)
+    untilted = truth - 2 * np.pi * (offset[0] * x + offset[1] * y)
+    assert _error(result, untilted, inner) < 0.03
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(-0.45, 0.45), st.floats(-0.45, 0.45), st.floats(0.0, 2 * np.pi), st.floats(0.0, 1.5)
+)
+def test_the_sideband_crop_never_reaches_nearer_another_lobe(
+    f_row: float, f_col: float, angle: float, scale: float
+) -> None:
+    """Inside the crop (rho < 1) a frequency is nearer the carrier than DC, the conjugate
+    sideband and their aliases one sampling frequency away, and within |f| of the carrier."""
+    carrier = np.array([f_row, f_col])
+    magnitude = float(np.hypot(*carrier))
+    assume(magnitude >= 0.01)  # smaller carriers give fewer than 4 fringes on any frame accepted
+    offset = scale * magnitude * np.array([np.cos(angle), np.sin(angle)])
+    rho = float(_crop_rho((np.array(offset[0]), np.array(offset[1])), (f_row, f_col)))
+    point = carrier + offset
+    lobes = (0 * carrier, -carrier)  # DC and the conjugate sideband
+    others = [np.array([i, j]) + lobe for i in (-1, 0, 1) for j in (-1, 0, 1) for lobe in lobes]
+    nearest_other = min(float(np.hypot(*(point - lobe))) for lobe in others)
+    if rho < 1.0:
+        # 1e-12: rounding of the two distances on the boundary itself
+        assert float(np.hypot(*offset)) < nearest_other + 1e-12
+        assert float(np.hypot(*offset)) <= magnitude * (1 + 1e-12)
+    else:  # and the crop is as large as that allows
+        assert float(np.hypot(*offset)) >= min(nearest_other, magnitude) - 1e-12
 
 
 @pytest.mark.parametrize(

@@ -8,8 +8,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from wavestack.simulators.optic import ApertureShape
+from wavestack.simulators.optic import ApertureShape, TestOptic
 from wavestack.station.processing import ProcessedSet
 from wavestack.station.record import StationRecorder, open_recording
 from wavestack.station.recording import RecordingReader
@@ -56,15 +57,14 @@ def test_phase_shifting_results_match_the_simulated_surface(station_factory) -> 
 
 def test_carrier_results_match_the_simulated_surface(station_factory) -> None:
     config = _config(method="carrier")
-    # 40 fringes along x: at 256 x 256 the pipeline's Fourier method is accurate for this carrier;
-    # oblique carriers on frames this small lose it (0.17 waves measured at (30, 18) cycles; at
-    # 1024 x 1024 with (60, 35) cycles, 0.011 waves), see the README's station section.
-    config = replace(config, optic=replace(config.optic, carrier_cycles=(40.0, 0.0)))
+    # an oblique carrier: 30 x 18 fringes across the 256 x 256 frame
+    config = replace(config, optic=replace(config.optic, carrier_cycles=(30.0, 18.0)))
     station, _ = station_factory(config)
     results, _ = _run(station, 6)
     assert all(r.valid for r in results)
-    # the Fourier method is less exact near the rims (measured 0.027 waves here): bound 0.05
-    assert all(r.truth_error_rms < 0.05 for r in results), [r.truth_error_rms for r in results]
+    # the Fourier method is less exact near the rims than phase shifting (measured 0.012 waves
+    # here, 0.0005 for the 5-step sets): bound 0.03
+    assert all(r.truth_error_rms < 0.03 for r in results), [r.truth_error_rms for r in results]
 
 
 def test_an_aperture_change_mid_run_is_picked_up(station_factory) -> None:
@@ -110,7 +110,10 @@ def test_an_unplugged_camera_gives_invalid_results_then_recovers(station_factory
 def test_the_plc_sees_only_clamped_rate_limited_commands_and_a_heartbeat(station_factory) -> None:
     config = _config()
     outputs = replace(config.outputs, max_removal_nm=20.0, max_step_nm=5.0, gain=1.0)
-    station, devices = station_factory(replace(config, outputs=outputs))
+    # a generous watchdog: this test is about the values sent; a machine loaded enough to stall
+    # the pipeline for the default 2 s (seen once in CI) would rightly trip it
+    plc = replace(config.plc, link=replace(config.plc.link, watchdog_timeout_s=20.0))
+    station, devices = station_factory(replace(config, outputs=outputs, plc=plc))
     results, _ = _run(station, 8)
     plc = devices.plc_simulator
     sent = np.asarray(plc.program.accepted_removals)
@@ -165,3 +168,48 @@ def test_an_aperture_that_vanishes_gives_invalid_results_never_forwarded(station
     assert invalid and all(r.reason.startswith("aperture:") for r in invalid), [r.reason for r in invalid]
     assert all(not r.output["sent"] and "HELD" in r.output["status"] for r in invalid)
     assert results[-1].valid and results[-1].truth_error_rms < 0.01
+
+
+def test_frames_of_another_size_start_a_new_aperture(station_factory) -> None:
+    config = _config()
+    station, devices = station_factory(config)
+    bench = devices.bench
+    smaller = TestOptic(replace(config.optic, aperture=ApertureShape("circle", centre_px=(110.0, 100.0),
+                                                                      radius_px=90.0)), 200, 224)
+
+    def render(block_id: int, time_ns: int, exposure_us: float):
+        shift = bench.piezo.voltage("x") * bench.coupling.radians_per_volt
+        pixels, _ = smaller.interferogram(time_ns * 1e-9, shift)
+        return pixels, None
+
+    def resize(result: StationResult) -> None:
+        if result.index == 2:
+            bench.camera.set_size(224, 200, render)  # the camera now streams 224 x 200 frames
+
+    results, _ = _run(station, 10, resize)
+    invalid = [r for r in results if not r.valid]
+    assert invalid and all(r.reason.startswith(("aperture:", "phase:", "device:")) for r in invalid)
+    late = results[-1]
+    assert late.valid and late.aperture["id"] >= 1
+    assert late.aperture["valid_pixels"] < results[0].aperture["valid_pixels"]
+
+
+def test_the_truth_error_equals_a_direct_fit_of_the_rendered_truth(station_factory) -> None:
+    station, devices = station_factory(_config())
+    checked: list[float] = []
+
+    def on_result(result: StationResult, frames, processed: ProcessedSet) -> None:
+        truth = devices.truth(frames[0]) if frames else None
+        if not result.valid or truth is None or truth.optic is None:
+            return
+        # the station's shortcut (true coefficients linear in time) against fitting the map itself;
+        # the optic computes its maps in float32, hence agreement to ~1e-7 relative, not 1e-15
+        direct = station.processor.fit_map(truth.optic.wavefront_waves, processed.choice).coefficients
+        fitter = processed.choice.fitter
+        assert result.truth_rms == pytest.approx(fitter.surface_rms(direct), rel=1e-5)
+        expected = fitter.surface_rms(processed.fit.coefficients - direct)
+        assert result.truth_error_rms == pytest.approx(expected, rel=1e-3, abs=1e-6)
+        checked.append(expected)
+
+    station.run(stop=threading.Event(), on_result=on_result, max_results=5)
+    assert len(checked) >= 3

@@ -68,7 +68,7 @@ from wavestack.station.station import Station
 
 logger = logging.getLogger(__name__)
 
-CARRIER_CYCLES_1024 = (60.0, 35.0)  # tilt fringes across a 1024-pixel frame; scaled to the frame size
+CARRIER_CYCLES = (60.0, 35.0)  # tilt fringes across the frame (see carrier_config)
 WARMUP_EXTRA = 2  # results on the configured fitter before the measurement starts
 RECORDED_SETS = 8  # sets kept for the stage benchmark (a 1024 x 1024 five-frame set is 10 MB)
 WARMUP_LIMIT_S = 90.0
@@ -121,15 +121,17 @@ def carrier_config(config: StationConfig, cycles: tuple[float, float] | None = N
     config : StationConfig
         A simulated station.
     cycles : (float, float), optional
-        Fringes across the width and height; default: the optic's own carrier, or (60, 35) scaled
-        from 1024 pixels to the frame (a fringe period of about 14.7 pixels).
+        Fringes across the width and height; default: the optic's own carrier, or (60, 35) cycles
+        whatever the frame size. The sideband's spread is set by the optic's aberration (about
+        20 cycles across the aperture here), not by the pixel count, so the carrier must stay
+        that far from DC: scaled down to (15, 9) on a 256-pixel frame it overlaps the background
+        and every result is flagged (measured 0.17 waves of residual).
     """
     assert config.optic is not None
-    sim = config.camera_simulator
     if cycles is None:
         cycles = config.optic.carrier_cycles
         if not any(cycles):
-            cycles = (CARRIER_CYCLES_1024[0] * sim.width / 1024, CARRIER_CYCLES_1024[1] * sim.height / 1024)
+            cycles = CARRIER_CYCLES
     return replace(config, processing=replace(config.processing, method="carrier"),
                    optic=replace(config.optic, carrier_cycles=(float(cycles[0]), float(cycles[1]))),
                    pzt=None, pzt_simulator=None)
