@@ -8,7 +8,6 @@ independent measurements; a tilted 6-frame set (Image2282-2287) and one carrier 
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
