@@ -284,6 +284,33 @@ def aperture_iou(a: Aperture | ArrayLike, b: Aperture | ArrayLike) -> float:
     return int(np.count_nonzero(mask_a & mask_b)) / union
 
 
+def compare_apertures(reference: Aperture, aperture: Aperture, iou_threshold: float) -> ApertureChange:
+    """Is ``aperture`` the same aperture as ``reference`` for a fitter built on the latter?
+
+    Parameters
+    ----------
+    reference, aperture : Aperture
+    iou_threshold : float
+        Smallest intersection over union that counts as the same aperture, in (0, 1].
+
+    Returns
+    -------
+    ApertureChange
+        ``changed`` when the mask shapes differ, the topology or the number of components
+        differs, or the IoU is below ``iou_threshold``; ``reason`` says which.
+    """
+    if reference.shape != aperture.shape:
+        return ApertureChange(True, 0.0, f"mask shape changed from {reference.shape} to {aperture.shape}")
+    iou = aperture_iou(reference, aperture)
+    if (reference.topology, reference.components) != (aperture.topology, aperture.components):
+        return ApertureChange(
+            True, iou, f"topology changed from {reference.describe()!r} to {aperture.describe()!r}"
+        )
+    if iou < iou_threshold:
+        return ApertureChange(True, iou, f"IoU {iou:.4f} below threshold {iou_threshold:g}")
+    return ApertureChange(False, iou, f"IoU {iou:.4f} >= threshold {iou_threshold:g}")
+
+
 class ApertureTracker:
     """Decide, frame after frame, whether a fitter built for an earlier aperture is reusable.
 
@@ -355,30 +382,8 @@ class ApertureTracker:
         reference = self._reference
         if reference is None:
             change = ApertureChange(True, 0.0, "no reference aperture yet")
-        elif reference.shape != aperture.shape:
-            change = ApertureChange(
-                True, 0.0, f"mask shape changed from {reference.shape} to {aperture.shape}"
-            )
         else:
-            iou = aperture_iou(reference, aperture)
-            if (reference.topology, reference.components) != (
-                aperture.topology,
-                aperture.components,
-            ):
-                change = ApertureChange(
-                    True,
-                    iou,
-                    f"topology changed from {reference.describe()!r} to "
-                    f"{aperture.describe()!r}",
-                )
-            elif iou < self._iou_threshold:
-                change = ApertureChange(
-                    True, iou, f"IoU {iou:.4f} below threshold {self._iou_threshold:g}"
-                )
-            else:
-                change = ApertureChange(
-                    False, iou, f"IoU {iou:.4f} >= threshold {self._iou_threshold:g}"
-                )
+            change = compare_apertures(reference, aperture, self._iou_threshold)
         if change.changed:
             self._reference = aperture
         return change

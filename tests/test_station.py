@@ -81,6 +81,9 @@ def test_an_aperture_change_mid_run_is_picked_up(station_factory) -> None:
     assert ids[0] == 0 and ids[-1] in (1, 2) and ids == sorted(ids), ids
     changed = [r for r in results if r.aperture.get("changed")]
     assert len(changed) == ids[-1] + 1 and summary.aperture_changes == len(changed)
+    # the set that first shows the new aperture is held until the next set confirms it
+    first_new = next(k for k, r in enumerate(results) if r.index > 3 and r.aperture.get("changed"))
+    assert "confirming on the next set" in (results[first_new - 1].reason or "")
     late = results[-1]
     assert late.valid and late.aperture["topology"].startswith("simply connected")
     assert late.truth_error_rms < 0.01
@@ -213,3 +216,24 @@ def test_the_truth_error_equals_a_direct_fit_of_the_rendered_truth(station_facto
 
     station.run(stop=threading.Event(), on_result=on_result, max_results=5)
     assert len(checked) >= 3
+
+
+def test_a_fit_whose_residual_exceeds_the_limit_is_flagged_and_held(station_factory) -> None:
+    config = _config(max_residual_waves=1e-6)  # below the simulator's noise: every fit is flagged
+    station, _ = station_factory(config)
+    results, _ = _run(station, 3)
+    assert all(not r.valid and r.reason.startswith("fit: residual") for r in results), [r.reason for r in results]
+    assert all(not r.output["sent"] and "HELD" in r.output["status"] for r in results)
+
+
+def test_a_watchdog_tripped_before_any_command_is_rearmed_once_at_start(station_factory) -> None:
+    import time
+
+    config = _config()
+    plc = replace(config.plc, link=replace(config.plc.link, watchdog_timeout_s=1.0))
+    station, devices = station_factory(replace(config, plc=plc))
+    time.sleep(2.0)  # connected (first heartbeat) and idle: the PLC's watchdog trips
+    assert devices.plc_simulator.watchdog_trips >= 1
+    results, _ = _run(station, 4)
+    # re-armed at the first result, then commands go through
+    assert len(devices.plc_simulator.accepted_commands) >= 2, [r.output for r in results]

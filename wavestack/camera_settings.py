@@ -17,7 +17,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from wavestack.config import ConfigError, parse_section, setting
+from wavestack.config import ConfigError, device_tables, parse_section, setting
 
 PixelFormat = Literal["Mono8", "Mono12", "Mono16"]
 
@@ -65,12 +65,9 @@ def parse_camera_config(document: Mapping[str, Any], *, source: str) -> tuple[Ca
     ConfigError
         Missing ``[camera]`` or any key error; the message names ``source`` and the key.
     """
-    table = document.get("camera")
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"{source}: missing table [camera] (the camera settings)")
-    main = {key: value for key, value in table.items() if key != "simulator"}
+    main, simulator_table = device_tables(document, "camera", what="the camera settings", source=source)
     settings = parse_section(CameraSettings, main, source=source, section="camera")
-    simulator = parse_section(CameraSimulatorSettings, table.get("simulator", {}), source=source,
+    simulator = parse_section(CameraSimulatorSettings, simulator_table or {}, source=source,
                               section="camera.simulator")
     if settings.simulated and settings.url != "sim://u3v":
         raise ConfigError(f"{source}: [camera] url: expected sim://u3v for the simulated camera, got {settings.url!r}")

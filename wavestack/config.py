@@ -92,6 +92,25 @@ def load_toml(path: str | Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: cannot read ({error.strerror})") from None
 
 
+def device_tables(document: Mapping[str, Any], name: str, *, what: str,
+                  source: str) -> tuple[Mapping[str, Any], Mapping[str, Any] | None]:
+    """Split a device's table ``[name]`` from its simulator's ``[name.simulator]``.
+
+    Returns
+    -------
+    (table without ``simulator``, the simulator table or None when absent)
+
+    Raises
+    ------
+    ConfigError
+        ``[name]`` is missing or not a table; ``what`` says what it should hold.
+    """
+    table = document.get(name)
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{source}: missing table [{name}] ({what})")
+    return {k: v for k, v in table.items() if k != "simulator"}, table.get("simulator")
+
+
 def parse_section(schema: type[T], table: Any, *, source: str, section: str) -> T:
     """Check one TOML table against a schema dataclass and build it.
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from wavestack.config import ConfigError, load_toml, parse_section, setting
+from wavestack.config import ConfigError, device_tables, load_toml, parse_section, setting
 from wavestack.drivers.plc.register_map import RegisterMap
 from wavestack.drivers.plc.transport import LinkTiming
 from wavestack.simulators.plc.polishing import PolishingStation
@@ -174,13 +174,10 @@ def parse_plc_config(document: Mapping[str, Any], *, source: str) -> PlcConfig:
     ConfigError
         As :func:`load_plc_config`.
     """
-    table = document.get("plc")
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"{source}: missing table [plc] (the PLC link)")
-    link_table = {k: v for k, v in table.items() if k != "simulator"}
+    link_table, simulator_table = device_tables(document, "plc", what="the PLC link", source=source)
     link = parse_section(PlcLinkSettings, link_table, source=source, section="plc")
-    simulator = (parse_section(PlcSimulatorSettings, table["simulator"], source=source, section="plc.simulator")
-                 if "simulator" in table else None)
+    simulator = (None if simulator_table is None else
+                 parse_section(PlcSimulatorSettings, simulator_table, source=source, section="plc.simulator"))
     config = PlcConfig(link, simulator, source)
     _check_consistency(config)
     return config

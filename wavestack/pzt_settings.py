@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from wavestack.config import ConfigError, load_toml, parse_section, setting
+from wavestack.config import ConfigError, device_tables, load_toml, parse_section, setting
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
 from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality
 
@@ -73,12 +73,9 @@ def parse_pzt_config(document: Mapping[str, Any], *, source: str) -> tuple[Piezo
         inconsistent values (software_min_v >= software_max_v, repeated axes, phase_axis not driven,
         zero volts_per_radian); each message names ``source`` and the key.
     """
-    table = document.get("pzt")
-    if not isinstance(table, Mapping):
-        raise ConfigError(f"{source}: missing table [pzt] (the piezo controller settings)")
-    main = {key: value for key, value in table.items() if key != "simulator"}
+    main, simulator_table = device_tables(document, "pzt", what="the piezo controller settings", source=source)
     settings = parse_section(PiezoSettings, main, source=source, section="pzt")
-    simulator = parse_section(PiezoSimulatorSettings, table.get("simulator", {}), source=source,
+    simulator = parse_section(PiezoSimulatorSettings, simulator_table or {}, source=source,
                               section="pzt.simulator")
     where = f"{source}: [pzt]"
     if settings.software_min_v >= settings.software_max_v:

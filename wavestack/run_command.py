@@ -18,7 +18,7 @@ from typing import TextIO
 
 import numpy as np
 
-from wavestack.arguments import positive_int
+from wavestack.arguments import positive_float, positive_int
 from wavestack.drivers.frames import Frame
 from wavestack.signals import stop_on_signals
 from wavestack.station.devices import open_station_devices
@@ -28,17 +28,6 @@ from wavestack.station.record import StationRecorder, open_recording
 from wavestack.station.results import StationResult
 from wavestack.station.settings import load_station_config
 from wavestack.station.station import Station, StationSummary
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a number > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds, got {text!r}") from None
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0, got {text!r}")
-    return value
 
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:

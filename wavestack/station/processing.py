@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 from wavestack.config import setting
 from wavestack.pipeline import Aperture
 from wavestack.pipeline.aperture import EmptyAperture, UnsupportedAperture
-from wavestack.pipeline.aperture_detect import DetectionSettings, aperture_iou, detect_aperture
+from wavestack.pipeline.aperture_detect import DetectionSettings, compare_apertures, detect_aperture
 from wavestack.pipeline.aperture_watch import ApertureWatch
 from wavestack.pipeline.carrier import carrier_phase
 from wavestack.pipeline.fitter import FitResult, InvalidFrame
@@ -313,14 +313,8 @@ class SetProcessor:
 
     def _difference(self, reference: Aperture, aperture: Aperture) -> str | None:
         """Why two apertures are not the same one (None when they are)."""
-        if reference.shape != aperture.shape:
-            return f"shape {reference.shape} -> {aperture.shape}"
-        if (reference.topology, reference.components) != (aperture.topology, aperture.components):
-            return f"{reference.describe()!r} -> {aperture.describe()!r}"
-        iou = aperture_iou(reference, aperture)
-        if iou < self.settings.iou_threshold:
-            return f"IoU {iou:.4f} below {self.settings.iou_threshold:g}"
-        return None
+        change = compare_apertures(reference, aperture, self.settings.iou_threshold)
+        return change.reason if change.changed else None
 
     def _invalid(self, reason: str, **fields: object) -> ProcessedSet:
         """An invalid result; the next carrier frame looks for its carrier afresh."""

@@ -56,12 +56,9 @@ def open_recording(path: str, config: StationConfig, frame_shape: tuple[int, int
                    *, overwrite: bool = False) -> RecordingWriter:
     """A recording for this station, its columns declared up front."""
     fps = config.processing.frames_per_set
-    template = recording_row(StationResult(
-        index=0, frame_ids=(), exposure_time_ns=0, latency_ms=0.0, valid=False, reason=None, coefficients=(),
-        ordering="", normalisation="", units="", residual_rms=0.0, fitter=None, fitter_fallback=False,
-        fitter_diagnostics={}, aperture={}, unwrap_path=None,
-        counters=Counters(0, 0, 0)),
-        config.processing.modes, fps)
+    # the columns' types and shapes, from an empty row (every row has the same ones)
+    template = recording_row(StationResult.invalid(0, "", Counters(0, 0, 0), ordering=config.processing.ordering),
+                             config.processing.modes, fps)
     return RecordingWriter(path, config_toml=config.text, conventions=conventions(config),
                            software_version=__version__, frame_shape=frame_shape, frame_dtype=frame_dtype,
                            frames_per_set=fps, overwrite=overwrite, metadata_keys=FRAME_METADATA,

@@ -90,20 +90,29 @@ class StationResult:
     truth_error_rms: float | None = None
     output: dict[str, Any] | None = None
 
+    @classmethod
+    def invalid(cls, index: int, reason: str, counters: Counters, *, ordering: str, exposure_time_ns: int = 0,
+                output: dict[str, Any] | None = None) -> StationResult:
+        """A result without a measurement (a lost device, a template row): no frames, no fit."""
+        return cls(index=index, frame_ids=(), exposure_time_ns=exposure_time_ns, latency_ms=0.0, valid=False,
+                   reason=reason, coefficients=(), ordering=ordering, normalisation="rms", units="waves",
+                   residual_rms=float("nan"), fitter=None, fitter_fallback=False, fitter_diagnostics={},
+                   aperture={}, unwrap_path=None, counters=counters, output=output)
+
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict with ``"type": "result"`` first; NaN becomes null."""
         values = asdict(self)
         values["frame_ids"] = list(self.frame_ids)
         values["coefficients"] = list(self.coefficients)
-        return {"type": "result", **_finite(values)}
+        return {"type": "result", **json_ready(values)}
 
 
-def _finite(value: Any) -> Any:
+def json_ready(value: Any) -> Any:
     """Replace NaN and infinities by None, recursively (JSON has no NaN)."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {key: _finite(item) for key, item in value.items()}
+        return {key: json_ready(item) for key, item in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_finite(item) for item in value]
+        return [json_ready(item) for item in value]
     return value

@@ -18,7 +18,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,7 +32,7 @@ from wavestack.station.devices import StationDevices, configure_camera, phase_st
 from wavestack.station.outputs import PlcOutput
 from wavestack.station.fitter_cache import FitterChoice
 from wavestack.station.processing import ProcessedSet, SetProcessor
-from wavestack.station.results import Counters, StationResult
+from wavestack.station.results import Counters, StationResult, json_ready
 from wavestack.station.settings import StationConfig
 from wavestack.station.sh_processing import SlopeProcessor, coefficient_errors
 from wavestack.station.sources import CarrierSource, PhaseStepSource
@@ -59,11 +59,7 @@ class StationSummary:
     last_reason: str | None = None
 
     def to_json(self) -> dict[str, object]:
-        from dataclasses import asdict
-
-        from wavestack.station.results import _finite
-
-        return {"type": "summary", **_finite(asdict(self))}
+        return {"type": "summary", **json_ready(asdict(self))}
 
 
 class Station:
@@ -188,12 +184,9 @@ class Station:
         if self._output is not None:
             output = self._output.publish(None, valid=False, measured_at_s=now_ns * 1e-9, now_s=now_ns * 1e-9,
                                           reason=f"device: {error}")
-        settings = self._config.processing
-        return StationResult(
-            index=index, frame_ids=(), exposure_time_ns=now_ns, latency_ms=0.0, valid=False,
-            reason=f"device: {error}", coefficients=(), ordering=settings.ordering, normalisation="rms",
-            units="waves", residual_rms=float("nan"), fitter=None, fitter_fallback=False, fitter_diagnostics={},
-            aperture={}, unwrap_path=None, counters=self._counters(index + 1), output=output)
+        return StationResult.invalid(index, f"device: {error}", self._counters(index + 1),
+                                     ordering=self._config.processing.ordering, exposure_time_ns=now_ns,
+                                     output=output)
 
     def _result(self, index: int, frames: tuple[Frame, ...], processed: ProcessedSet,
                 truth: FrameTruth | SpotTruth | None = None) -> StationResult:
