@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 from wavestack.paper_apertures import PAPER_APERTURES, annulus_circular_hole_mask  # noqa: E402
 from wavestack.pipeline import Aperture, build_fitter  # noqa: E402
-from wavestack.pipeline.qcm import csf_qcm_map  # noqa: E402
+from wavestack.pipeline import csf_qcm_map  # noqa: E402
 
 
 def main() -> int:

@@ -26,7 +26,7 @@ from collections.abc import Callable  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from wavestack.pipeline.psi import four_step, hariharan_five_step  # noqa: E402
+from wavestack.pipeline import four_step, hariharan_five_step  # noqa: E402
 
 SIZE = 1024
 

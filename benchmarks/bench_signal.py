@@ -25,12 +25,12 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from wavestack.pipeline import detect_aperture, mode_list  # noqa: E402
-from wavestack.pipeline.aperture_watch import ApertureWatch  # noqa: E402
-from wavestack.pipeline.carrier import carrier_phase  # noqa: E402
-from wavestack.pipeline.psi import four_step, hariharan_five_step  # noqa: E402
-from wavestack.pipeline.shack_hartmann import Centroider, LensletGrid, slopes  # noqa: E402
-from wavestack.pipeline.slope_reconstruction import ModalReconstructor  # noqa: E402
-from wavestack.pipeline.unwrap import TemporalUnwrapper, unwrap_spatial  # noqa: E402
+from wavestack.pipeline import ApertureWatch  # noqa: E402
+from wavestack.pipeline import carrier_phase  # noqa: E402
+from wavestack.pipeline import four_step, hariharan_five_step  # noqa: E402
+from wavestack.pipeline import Centroider, LensletGrid, slopes  # noqa: E402
+from wavestack.pipeline import ModalReconstructor  # noqa: E402
+from wavestack.pipeline import TemporalUnwrapper, unwrap_spatial  # noqa: E402
 
 SIZE = 1024
 

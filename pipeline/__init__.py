@@ -37,7 +37,39 @@ from .zernike_index import (
     normalisation_factor,
 )
 
+from .zernike_index import mode_name
+from .methods import MappingOptions, Samples, mapped_columns
+from .methods import canonical_map as build_canonical_map
+from .shack_hartmann import Centroider, LensletGrid, SpotMeasurement, convert_slopes, slopes
+from .slope_reconstruction import ModalReconstructor
+from .aperture_detect import compare_apertures
+from .aperture_watch import ApertureWatch
+from .measurement import local_fringe_contrast
+from .unwrap import SpatialParams
+from .conic_null import null_wavefront_waves
+from .psi import four_step, hariharan_five_step
+from .qcm import csf_qcm_map
+
 __all__ = [
+    "mode_name",
+    "MappingOptions",
+    "Samples",
+    "mapped_columns",
+    "build_canonical_map",
+    "Centroider",
+    "LensletGrid",
+    "SpotMeasurement",
+    "convert_slopes",
+    "slopes",
+    "ModalReconstructor",
+    "compare_apertures",
+    "ApertureWatch",
+    "local_fringe_contrast",
+    "SpatialParams",
+    "null_wavefront_waves",
+    "four_step",
+    "hariharan_five_step",
+    "csf_qcm_map",
     "Aperture",
     "ApertureTracker",
     "ConicTest",

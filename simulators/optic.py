@@ -70,9 +70,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.pipeline.aperture import Aperture
-from wavestack.pipeline.zernike import zernike_basis
-from wavestack.pipeline.zernike_index import mode_list
+from wavestack.pipeline import Aperture
+from wavestack.pipeline import zernike_basis
+from wavestack.pipeline import mode_list
 from wavestack.simulators.aperture_shape import ApertureKind, ApertureShape, _finite
 from wavestack.simulators.optic_settings import BitDepth, OpticSettings
 

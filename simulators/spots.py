@@ -53,7 +53,7 @@ import numpy as np
 import scipy.special
 from numpy.typing import NDArray
 
-from wavestack.pipeline.zernike import zernike_gradient
+from wavestack.pipeline import zernike_gradient
 
 from .optic import BitDepth, TestOptic
 

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from wavestack.pipeline import Aperture, build_fitter
-from wavestack.pipeline.conic_null import ConicTest, implied_conic_constant
-from wavestack.pipeline.images import read_frame, read_frame_set
-from wavestack.pipeline.measurement import wavefront_from_carrier, wavefront_from_phase_shifts
-from wavestack.pipeline.zygo import read_metropro_dat
+from wavestack.pipeline import ConicTest, implied_conic_constant
+from wavestack.pipeline import read_frame, read_frame_set
+from wavestack.pipeline import wavefront_from_carrier, wavefront_from_phase_shifts
+from wavestack.pipeline import read_metropro_dat
 
 from shared_data import DATA, require_shared_data
 

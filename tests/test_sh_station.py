@@ -32,8 +32,8 @@ import numpy as np
 import pytest
 
 from wavestack.config import ConfigError
-from wavestack.pipeline.slope_reconstruction import ModalReconstructor
-from wavestack.pipeline.zernike_index import mode_list
+from wavestack.pipeline import ModalReconstructor
+from wavestack.pipeline import mode_list
 from wavestack.simulators.optic import ApertureShape, TestOptic
 from wavestack.simulators.spots import SpotRenderer, SpotTruth
 from wavestack.station.devices import StationDevices

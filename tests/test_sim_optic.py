@@ -31,8 +31,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wavestack.pipeline import build_fitter, mode_list, phase_from_frames, unwrap_spatial, zernike_basis
-from wavestack.pipeline.aperture import Aperture
-from wavestack.pipeline.measurement import wavefront_from_carrier, wavefront_from_phase_shifts
+from wavestack.pipeline import Aperture
+from wavestack.pipeline import wavefront_from_carrier, wavefront_from_phase_shifts
 from wavestack.simulators.optic import ApertureShape, OpticSettings, OpticTruth, TestOptic
 
 SIZE = 256

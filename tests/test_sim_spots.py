@@ -27,8 +27,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from wavestack.pipeline.shack_hartmann import Centroider, LensletGrid, convert_slopes, slopes
-from wavestack.pipeline.slope_reconstruction import ModalReconstructor
+from wavestack.pipeline import Centroider, LensletGrid, convert_slopes, slopes
+from wavestack.pipeline import ModalReconstructor
 from wavestack.simulators.optic import ApertureShape, OpticSettings, TestOptic
 from wavestack.simulators.spots import LensletArraySettings, SpotRenderer, SpotTruth
 

@@ -16,16 +16,12 @@ import numpy as np
 
 from wavestack.arguments import positive_int
 from wavestack.pipeline import Aperture, InputError, build_fitter
-from wavestack.pipeline.aperture_detect import DetectionSettings, detect_aperture
-from wavestack.pipeline.conic_null import ConicTest, implied_conic_constant, null_wavefront_waves
-from wavestack.pipeline.images import read_frame, read_frame_set
-from wavestack.pipeline.measurement import (
-    MeasuredWavefront,
-    wavefront_from_carrier,
-    wavefront_from_phase_shifts,
-)
-from wavestack.pipeline.zygo import read_datx, read_metropro_dat
-from wavestack.pipeline.zernike_index import mode_name
+from wavestack.pipeline import DetectionSettings, detect_aperture
+from wavestack.pipeline import ConicTest, implied_conic_constant, null_wavefront_waves
+from wavestack.pipeline import read_frame, read_frame_set
+from wavestack.pipeline import MeasuredWavefront, wavefront_from_carrier, wavefront_from_phase_shifts
+from wavestack.pipeline import read_datx, read_metropro_dat
+from wavestack.pipeline import mode_name
 
 _MAP_SUFFIXES = {".dat", ".datx"}
 

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from wavestack.paper_apertures import PAPER_APERTURES
 from wavestack.pipeline import Aperture, Pupil, build_fitter, mode_list, zernike_basis
-from wavestack.pipeline.methods import MappingOptions, Samples, mapped_columns, canonical_map
+from wavestack.pipeline import MappingOptions, Samples, build_canonical_map, mapped_columns
 
 logger = logging.getLogger(__name__)
 
@@ -114,7 +114,7 @@ def _basis_change(aperture: Aperture, method: str, laplacian: str, balance: bool
     samples = Samples(rows * aperture.shape[1] + cols, rows, cols, cols * 0.0, rows * 0.0, 0)
     modes = mode_list("noll", MODES)
     coarse, fine = (
-        mapped_columns(canonical_map(aperture, method, MappingOptions(laplacian, vertices, balance)), samples, modes)
+        mapped_columns(build_canonical_map(aperture, method, MappingOptions(laplacian, vertices, balance)), samples, modes)
         for vertices in (5000, 15000)
     )
     return float(np.linalg.norm(coarse - fine) / np.linalg.norm(fine))

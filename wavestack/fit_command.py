@@ -22,7 +22,7 @@ from wavestack.pipeline import (
     load_map,
     load_mask,
 )
-from wavestack.pipeline.zernike_index import mode_name
+from wavestack.pipeline import mode_name
 
 _DTYPES = {"float64": np.float64, "float32": np.float32}
 # Above this coefficient noise amplification the human report warns that single coefficients

@@ -32,14 +32,14 @@ from numpy.typing import NDArray
 
 from wavestack.config import setting
 from wavestack.pipeline import Aperture
-from wavestack.pipeline.aperture import EmptyAperture, UnsupportedAperture
-from wavestack.pipeline.aperture_detect import DetectionSettings, compare_apertures, detect_aperture
-from wavestack.pipeline.aperture_watch import ApertureWatch
-from wavestack.pipeline.carrier import carrier_phase
-from wavestack.pipeline.fitter import FitResult, InvalidFrame
-from wavestack.pipeline.measurement import local_fringe_contrast
-from wavestack.pipeline.psi import phase_from_frames
-from wavestack.pipeline.unwrap import SpatialParams, TemporalUnwrapper
+from wavestack.pipeline import EmptyAperture, UnsupportedAperture
+from wavestack.pipeline import DetectionSettings, compare_apertures, detect_aperture
+from wavestack.pipeline import ApertureWatch
+from wavestack.pipeline import carrier_phase
+from wavestack.pipeline import FitResult, InvalidFrame
+from wavestack.pipeline import local_fringe_contrast
+from wavestack.pipeline import phase_from_frames
+from wavestack.pipeline import SpatialParams, TemporalUnwrapper
 from wavestack.station.fitter_cache import FitSettings, FitterCache, FitterChoice
 
 if TYPE_CHECKING:

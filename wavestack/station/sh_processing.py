@@ -47,9 +47,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wavestack.config import setting
-from wavestack.pipeline.shack_hartmann import Centroider, LensletGrid, SpotMeasurement, convert_slopes, slopes
-from wavestack.pipeline.slope_reconstruction import ModalReconstructor
-from wavestack.pipeline.zernike_index import mode_list
+from wavestack.pipeline import Centroider, LensletGrid, SpotMeasurement, convert_slopes, slopes
+from wavestack.pipeline import ModalReconstructor
+from wavestack.pipeline import mode_list
 from wavestack.station.processing import ProcessedSet
 
 logger = logging.getLogger(__name__)

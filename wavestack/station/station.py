@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout
 from wavestack.drivers.frames import Frame
-from wavestack.pipeline.fitter import InvalidFrame
+from wavestack.pipeline import InvalidFrame
 from wavestack.simulators.bench import FrameTruth
 from wavestack.simulators.spots import SpotTruth
 from wavestack.station.devices import StationDevices, configure_camera, phase_steps_rad
