@@ -283,6 +283,29 @@ class Aperture:
                 f"{self._counts()}; expected one component with at most one hole"
             )
 
+    def eroded(self, radius_px: int) -> Aperture:
+        """The aperture shrunk by a disk of ``radius_px`` pixels (an elliptical structuring element).
+
+        Used where a detection spreads the edge outward by a known amount, e.g. the local-contrast
+        box of a carrier frame, which reaches half a box beyond the fringes.
+
+        Parameters
+        ----------
+        radius_px : int
+            Radius of the disk, pixels; 0 returns the aperture unchanged.
+
+        Returns
+        -------
+        Aperture
+            A new aperture from the eroded mask, with the same ``min_hole_area_px``.
+        """
+        if radius_px <= 0:
+            return self
+        size = 2 * int(radius_px) + 1
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+        mask = cv2.erode(self.mask.astype(np.uint8), kernel).astype(bool)
+        return Aperture.from_mask(mask, min_hole_area_px=self.min_hole_area_px)
+
     def enclosing_circle(self) -> tuple[float, float, float]:
         """Minimum enclosing circle of the valid pixel centres.
 

@@ -193,10 +193,7 @@ def wavefront_from_carrier(
     tick = time.perf_counter()
     found = detect_aperture(contrast, detection).aperture
     # the box of two periods spreads the contrast edge outward by half a box: take it back
-    half_box = int(round(period))
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * half_box + 1, 2 * half_box + 1))
-    mask = cv2.erode(found.mask.astype(np.uint8), kernel).astype(bool)
-    aperture = Aperture.from_mask(mask, min_hole_area_px=found.min_hole_area_px)
+    aperture = found.eroded(int(round(period)))
     timings["aperture"] = time.perf_counter() - tick
     tick = time.perf_counter()
     waves = unwrap_spatial(result.phase, aperture.mask, _UNWRAP) / (2.0 * np.pi)

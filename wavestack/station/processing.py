@@ -26,7 +26,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Literal
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -288,10 +287,7 @@ class SetProcessor:
             return False
         detected = detect_aperture(signal, self._detection)
         aperture = detected.aperture
-        if erode_px > 0:  # the contrast box spreads the edge outward by half a box: take it back
-            kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * erode_px + 1, 2 * erode_px + 1))
-            eroded = cv2.erode(aperture.mask.astype(np.uint8), kernel).astype(bool)
-            aperture = Aperture.from_mask(eroded, min_hole_area_px=aperture.min_hole_area_px)
+        aperture = aperture.eroded(erode_px)  # the contrast box spreads the edge outward by half a box
         watch = ApertureWatch(detected.aperture.mask, detected.threshold, factor=self.settings.watch_block_px)
         if self._aperture is not None:
             difference = self._difference(self._aperture, aperture)
