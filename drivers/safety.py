@@ -113,6 +113,19 @@ class SafetyStage:
     Notes
     -----
     Not thread-safe: one owner (the station's loop) calls :meth:`update`.
+
+    Examples
+    --------
+    One channel, 0..10 V, at most 1 V per update; a request of 5 V moves the output from the
+    safe value 0 V by one step, and a stale request holds it there:
+
+    >>> stage = SafetyStage(SafetyLimits(lower=[0.0], upper=[10.0], max_step=1.0, max_age_s=0.5))
+    >>> out = stage.update([5.0], measured_at_s=0.0, now_s=0.1)
+    >>> out.values.tolist(), out.status == SafetyStatus.RATE_LIMITED
+    ([1.0], True)
+    >>> out = stage.update([5.0], measured_at_s=0.0, now_s=1.0)
+    >>> out.values.tolist(), out.forwarded, out.status == SafetyStatus.STALE | SafetyStatus.HELD
+    ([1.0], False, True)
     """
 
     def __init__(self, limits: SafetyLimits) -> None:

@@ -156,6 +156,11 @@ def encode_set_voltage(axis: str, volts: float) -> bytes:
     ------
     ValueError
         Unknown axis or a non-finite or negative voltage.
+
+    Examples
+    --------
+    >>> encode_set_voltage("x", 12.345)
+    b'xvoltage=12.35\\r'
     """
     _check_axis(axis)
     if not is_finite_real(volts) or volts < 0:

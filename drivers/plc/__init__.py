@@ -7,6 +7,8 @@
 - :mod:`.driver`: :class:`PolishingLink`, heartbeat, command handshake, self-check, re-arm.
 """
 
+from __future__ import annotations
+
 from wavestack.drivers.plc.codec import (
     WORD_ORDERS,
     WordOrder,

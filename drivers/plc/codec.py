@@ -102,6 +102,15 @@ def encode_float32(value: float, order: WordOrder) -> tuple[int, int]:
     ------
     ValueError
         Unknown order, or a finite value beyond the float32 range (about 3.4e38).
+
+    Examples
+    --------
+    1.0 is ``0x3F800000`` in float32; ``"CDAB"`` sends the low word first:
+
+    >>> encode_float32(1.0, "ABCD"), encode_float32(1.0, "CDAB")
+    ((16256, 0), (0, 16256))
+    >>> decode_float32((0, 16256), "CDAB")
+    1.0
     """
     try:
         packed = struct.pack(">f", float(value))

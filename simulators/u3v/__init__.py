@@ -9,6 +9,8 @@ GenICam XML, leader/payload/trailer streaming) and is written independently of t
 simulate the cable.
 """
 
+from __future__ import annotations
+
 from wavestack.simulators.u3v.backend import SimulatedUsbBackend, usb_error
 from wavestack.simulators.u3v.camera import SimulatedU3VCamera
 from wavestack.simulators.u3v.descriptors import (EP_ACK_IN, EP_COMMAND_OUT, EP_STREAM_IN, SIM_PRODUCT_ID,
