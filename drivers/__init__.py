@@ -8,6 +8,8 @@ side: :mod:`~wavestack.drivers.u3v` (USB3 Vision cameras over pyusb),
 imported explicitly, so importing this one loads no USB, serial or Modbus library.
 """
 
+from __future__ import annotations
+
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, LimitError, ProtocolError
 from wavestack.drivers.frames import Frame, FrameSource, SlopeFrame, SlopeSource
 from wavestack.drivers.ring import FrameRing, RingCounters, RingPolicy

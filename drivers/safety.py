@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wavestack.drivers._checks import read_only_copy
 from wavestack.drivers.safety_limits import InvalidAction as InvalidAction  # re-exported
 from wavestack.drivers.safety_limits import SafetyLimits
 
@@ -112,6 +113,19 @@ class SafetyStage:
     Notes
     -----
     Not thread-safe: one owner (the station's loop) calls :meth:`update`.
+
+    Examples
+    --------
+    One channel, 0..10 V, at most 1 V per update; a request of 5 V moves the output from the
+    safe value 0 V by one step, and a stale request holds it there:
+
+    >>> stage = SafetyStage(SafetyLimits(lower=[0.0], upper=[10.0], max_step=1.0, max_age_s=0.5))
+    >>> out = stage.update([5.0], measured_at_s=0.0, now_s=0.1)
+    >>> out.values.tolist(), out.status == SafetyStatus.RATE_LIMITED
+    ([1.0], True)
+    >>> out = stage.update([5.0], measured_at_s=0.0, now_s=1.0)
+    >>> out.values.tolist(), out.forwarded, out.status == SafetyStatus.STALE | SafetyStatus.HELD
+    ([1.0], False, True)
     """
 
     def __init__(self, limits: SafetyLimits) -> None:
@@ -191,66 +205,32 @@ class SafetyStage:
         """
         lim = self._limits
         request = None if requested is None else self._as_request(requested, "requested")
-        request_copy = None
-        if request is not None:
-            request_copy = request.copy()
-            request_copy.setflags(write=False)
-        status = SafetyStatus.OK
-        reasons: list[str] = []
-
-        if request is None:
-            status |= SafetyStatus.INVALID
-            reasons.append("no request" + (f" ({reason})" if reason else ""))
-        else:
-            non_finite = ~np.isfinite(request)
-            if non_finite.any():
-                status |= SafetyStatus.NON_FINITE
-                reasons.append(f"non-finite request on channels {_channels(non_finite)}")
-            if not valid:
-                status |= SafetyStatus.INVALID
-                reasons.append("request marked invalid" + (f" ({reason})" if reason else ""))
-        stale_reason = self._staleness(measured_at_s, now_s)
+        status, reasons = _screen_request(request, valid, reason)
+        stale_reason = _staleness(lim, measured_at_s, now_s)
         if stale_reason is not None:
             status |= SafetyStatus.STALE
             reasons.append(stale_reason)
 
         if status != SafetyStatus.OK:
-            status |= SafetyStatus.HELD
-            if lim.invalid_action == "safe_value":
-                values = self._step_toward(lim.safe_value)
-                if not np.array_equal(values, lim.safe_value):
-                    status |= SafetyStatus.RATE_LIMITED
-                reasons.append("moving toward safe_value")
-            else:
-                values = self._last.copy()
-                reasons.append("holding the last output")
+            values, action, action_reasons = _invalid_output(lim, self._last)
             if not self._holding:
-                _log.warning("safety stage stops forwarding: %s", "; ".join(reasons))
+                _log.warning("safety stage stops forwarding: %s", "; ".join(reasons + action_reasons))
             self._holding = True
         else:
             assert request is not None  # a missing request always sets INVALID above
-            clipped = np.clip(request, lim.lower, lim.upper)
-            was_clipped = clipped != request
-            if was_clipped.any():
-                status |= SafetyStatus.CLIPPED
-                reasons.append(f"clipped to the drive limits on channels {_channels(was_clipped)}")
-            values = self._step_toward(clipped)
-            was_limited = values != clipped
-            if was_limited.any():
-                status |= SafetyStatus.RATE_LIMITED
-                reasons.append(f"rate limited to max_step on channels {_channels(was_limited)}")
+            values, action, action_reasons = _drive(lim, self._last, request)
             if self._holding:
                 _log.info("safety stage forwards requests again")
             self._holding = False
+        status |= action
+        reasons.extend(action_reasons)
 
         self._last = values
-        out = values.copy()
-        out.setflags(write=False)
         return SafeOutput(
-            values=out,
+            values=read_only_copy(values),
             status=status,
             reason="; ".join(reasons) if reasons else None,
-            requested=request_copy,
+            requested=None if request is None else read_only_copy(request),
         )
 
     # ------------------------------------------------------------------------------- private
@@ -264,47 +244,103 @@ class SafetyStage:
             raise ValueError(f"SafetyStage: {name} must have shape ({n},), got {arr.shape}")
         return arr
 
-    def _staleness(self, measured_at_s: float, now_s: float) -> str | None:
-        """Why the measurement time makes the request stale, or None if it is fresh."""
-        try:
-            measured, now = float(measured_at_s), float(now_s)
-        except (TypeError, ValueError):
-            return f"timestamps not numbers (measured_at_s={measured_at_s!r}, now_s={now_s!r})"
-        if not (math.isfinite(measured) and math.isfinite(now)):
-            return f"timestamps not finite (measured_at_s={measured}, now_s={now})"
-        age = now - measured
-        if age > self._limits.max_age_s:
-            return f"input stale: measured {age:.3g} s ago, max_age_s={self._limits.max_age_s:g}"
-        if -age > self._limits.max_future_s:
-            return (
-                f"input time-stamped {-age:.3g} s in the future "
-                f"(clock skew tolerance max_future_s={self._limits.max_future_s:g})"
-            )
-        return None
 
-    def _step_toward(self, target: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Move from the last output toward ``target`` (within limits) by at most ``max_step``.
+# ------------------------------------------------------------------ the ao-record stages, pure
+def _screen_request(
+    request: NDArray[np.float64] | None, valid: bool, reason: str | None
+) -> tuple[SafetyStatus, list[str]]:
+    """Reject a missing, non-finite or caller-invalidated request: the flags and reasons (IVOA input)."""
+    status = SafetyStatus.OK
+    reasons: list[str] = []
+    if request is None:
+        status |= SafetyStatus.INVALID
+        reasons.append("no request" + (f" ({reason})" if reason else ""))
+        return status, reasons
+    non_finite = ~np.isfinite(request)
+    if non_finite.any():
+        status |= SafetyStatus.NON_FINITE
+        reasons.append(f"non-finite request on channels {_channels(non_finite)}")
+    if not valid:
+        status |= SafetyStatus.INVALID
+        reasons.append("request marked invalid" + (f" ({reason})" if reason else ""))
+    return status, reasons
 
-        ``target`` must lie in ``[lower, upper]``. Exact in float64: the result lies in
-        ``[lower, upper]``, equals ``target`` when ``|target - last| <= max_step``, and
-        ``|result - last| <= max_step`` as evaluated in float64 (a rounding overshoot is nudged
-        back toward ``last`` one ulp at a time; ``last`` itself satisfies both bounds, so the
-        nudging terminates).
-        """
-        lim, last = self._limits, self._last
-        with np.errstate(over="ignore", invalid="ignore"):
-            gap = target - last
-        # within one step: take the target itself (last + gap can round away from it)
-        values = np.where(
-            np.abs(gap) <= lim.max_step,
-            target,
-            np.clip(last + np.clip(gap, -lim.max_step, lim.max_step), lim.lower, lim.upper),
+
+def _staleness(limits: SafetyLimits, measured_at_s: float, now_s: float) -> str | None:
+    """Why the measurement time makes the request stale, or None if it is fresh."""
+    try:
+        measured, now = float(measured_at_s), float(now_s)
+    except (TypeError, ValueError):
+        return f"timestamps not numbers (measured_at_s={measured_at_s!r}, now_s={now_s!r})"
+    if not (math.isfinite(measured) and math.isfinite(now)):
+        return f"timestamps not finite (measured_at_s={measured}, now_s={now})"
+    age = now - measured
+    if age > limits.max_age_s:
+        return f"input stale: measured {age:.3g} s ago, max_age_s={limits.max_age_s:g}"
+    if -age > limits.max_future_s:
+        return (
+            f"input time-stamped {-age:.3g} s in the future "
+            f"(clock skew tolerance max_future_s={limits.max_future_s:g})"
         )
-        for _ in range(_MAX_NUDGES):
-            over = np.abs(values - last) > lim.max_step
-            if not over.any():
-                return values
-            values = np.where(over, np.nextafter(values, last), values)
-        # Unreachable for finite limits (one or two ulps at most); never emit an unchecked value.
-        over = np.abs(values - last) > lim.max_step
-        return np.where(over, last, values)
+    return None
+
+
+def _invalid_output(
+    limits: SafetyLimits, last: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], SafetyStatus, list[str]]:
+    """The output when a request is not forwarded (IVOA): hold ``last`` or step toward ``safe_value``."""
+    status = SafetyStatus.HELD
+    if limits.invalid_action == "safe_value":
+        values = _step_toward(limits, last, limits.safe_value)
+        if not np.array_equal(values, limits.safe_value):
+            status |= SafetyStatus.RATE_LIMITED
+        return values, status, ["moving toward safe_value"]
+    return last.copy(), status, ["holding the last output"]
+
+
+def _drive(
+    limits: SafetyLimits, last: NDArray[np.float64], request: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], SafetyStatus, list[str]]:
+    """A forwarded request: clip to the drive limits (DRVL/DRVH), then limit the rate (OROC)."""
+    status = SafetyStatus.OK
+    reasons: list[str] = []
+    clipped = np.clip(request, limits.lower, limits.upper)
+    was_clipped = clipped != request
+    if was_clipped.any():
+        status |= SafetyStatus.CLIPPED
+        reasons.append(f"clipped to the drive limits on channels {_channels(was_clipped)}")
+    values = _step_toward(limits, last, clipped)
+    was_limited = values != clipped
+    if was_limited.any():
+        status |= SafetyStatus.RATE_LIMITED
+        reasons.append(f"rate limited to max_step on channels {_channels(was_limited)}")
+    return values, status, reasons
+
+
+def _step_toward(
+    limits: SafetyLimits, last: NDArray[np.float64], target: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Move from ``last`` toward ``target`` (within limits) by at most ``max_step``.
+
+    ``target`` must lie in ``[lower, upper]``. Exact in float64: the result lies in
+    ``[lower, upper]``, equals ``target`` when ``|target - last| <= max_step``, and
+    ``|result - last| <= max_step`` as evaluated in float64 (a rounding overshoot is nudged
+    back toward ``last`` one ulp at a time; ``last`` itself satisfies both bounds, so the
+    nudging terminates).
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        gap = target - last
+    # within one step: take the target itself (last + gap can round away from it)
+    values = np.where(
+        np.abs(gap) <= limits.max_step,
+        target,
+        np.clip(last + np.clip(gap, -limits.max_step, limits.max_step), limits.lower, limits.upper),
+    )
+    for _ in range(_MAX_NUDGES):
+        over = np.abs(values - last) > limits.max_step
+        if not over.any():
+            return values
+        values = np.where(over, np.nextafter(values, last), values)
+    # Unreachable for finite limits (one or two ulps at most); never emit an unchecked value.
+    over = np.abs(values - last) > limits.max_step
+    return np.where(over, last, values)

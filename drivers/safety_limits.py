@@ -15,6 +15,8 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wavestack.drivers._checks import is_number
+
 __all__ = ["InvalidAction", "SafetyLimits"]
 
 InvalidAction = Literal["hold", "safe_value"]
@@ -111,8 +113,7 @@ class SafetyLimits:
             )
         for name in ("max_age_s", "max_future_s"):
             value = getattr(self, name)
-            is_number = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
-            if not (is_number and math.isfinite(value)):
+            if not (is_number(value) and math.isfinite(value)):
                 raise ValueError(f"SafetyLimits.{name}: expected a finite number of seconds, got {value!r}")
             object.__setattr__(self, name, float(value))
         if self.max_age_s <= 0.0:

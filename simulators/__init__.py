@@ -11,6 +11,8 @@ The ``sim://`` URL handler for pyserial is registered only by an explicit call t
 :func:`register_serial_simulators`.
 """
 
+from __future__ import annotations
+
 from wavestack.simulators.serial_registry import attach_simulated_device, register_serial_simulators
 
 __all__ = ["attach_simulated_device", "register_serial_simulators"]

@@ -16,23 +16,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wavestack.simulators._checks import finite_number, number_pair
+
 ApertureKind = Literal["circle", "annulus", "ellipse", "rectangle", "polygon"]
-
-
-def _finite(value: object, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name}: expected a number, got {value!r}")
-    if not math.isfinite(float(value)):
-        raise ValueError(f"{name}: expected a finite number, got {value!r}")
-    return float(value)
-
-
-def _pair(value: object, name: str) -> tuple[float, float]:
-    try:
-        first, second = value  # type: ignore[misc]
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: expected a pair of numbers, got {value!r}") from None
-    return _finite(first, f"{name}[0]"), _finite(second, f"{name}[1]")
 
 
 @dataclass(frozen=True)
@@ -82,12 +68,12 @@ class ApertureShape:
             raise ValueError(
                 f"kind: expected circle, annulus, ellipse, rectangle or polygon, got {self.kind!r}"
             )
-        centre = _pair(self.centre_px, "centre_px")
-        if self.kind in ("circle", "annulus") and _finite(self.radius_px, "radius_px") <= 0:
+        centre = number_pair(self.centre_px, "centre_px")
+        if self.kind in ("circle", "annulus") and finite_number(self.radius_px, "radius_px") <= 0:
             raise ValueError(f"radius_px: expected > 0 pixels, got {self.radius_px!r}")
         if self.kind == "annulus":
-            inner = _finite(self.inner_radius_px, "inner_radius_px")
-            hole = centre if self.obscuration_centre_px is None else _pair(
+            inner = finite_number(self.inner_radius_px, "inner_radius_px")
+            hole = centre if self.obscuration_centre_px is None else number_pair(
                 self.obscuration_centre_px, "obscuration_centre_px"
             )
             if not 0 < inner < self.radius_px:
@@ -100,15 +86,15 @@ class ApertureShape:
                     f"inside the outer circle of radius {self.radius_px} at {centre}"
                 )
         if self.kind in ("ellipse", "rectangle"):
-            a, b = _pair(self.semi_axes_px, "semi_axes_px")
+            a, b = number_pair(self.semi_axes_px, "semi_axes_px")
             if a <= 0 or b <= 0:
                 raise ValueError(f"semi_axes_px: expected two numbers > 0, got {self.semi_axes_px!r}")
-            _finite(self.rotation_deg, "rotation_deg")
+            finite_number(self.rotation_deg, "rotation_deg")
         if self.kind == "polygon":
             if len(self.vertices_px) < 3:
                 raise ValueError(f"vertices_px: expected at least 3 (col, row) vertices, got {self.vertices_px!r}")
             for index, vertex in enumerate(self.vertices_px):
-                _pair(vertex, f"vertices_px[{index}]")
+                number_pair(vertex, f"vertices_px[{index}]")
 
     def bounds(self) -> tuple[float, float, float, float]:
         """``(col_min, col_max, row_min, row_max)`` of a box holding the shape, pixels."""

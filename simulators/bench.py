@@ -15,7 +15,7 @@ from typing import Any
 
 from numpy.typing import NDArray
 
-from wavestack.simulators.mdt693b.device import MDT693BDevice
+from wavestack.simulators.mdt693b import MDT693BDevice
 from wavestack.simulators.optic import OpticTruth, TestOptic
 from wavestack.simulators.spots import SpotRenderer
 from wavestack.simulators.u3v import SimulatedU3VCamera, SimulatedUsbBackend, U3VSimSettings

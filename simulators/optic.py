@@ -73,7 +73,8 @@ from numpy.typing import NDArray
 from wavestack.pipeline import Aperture
 from wavestack.pipeline import zernike_basis
 from wavestack.pipeline import mode_list
-from wavestack.simulators.aperture_shape import ApertureKind, ApertureShape, _finite
+from wavestack.simulators._checks import check_image_size, finite_number, read_only
+from wavestack.simulators.aperture_shape import ApertureKind, ApertureShape
 from wavestack.simulators.optic_settings import BitDepth, OpticSettings
 
 __all__ = ["ApertureKind", "ApertureShape", "BitDepth", "OpticSettings", "OpticTruth", "TestOptic"]
@@ -82,12 +83,6 @@ logger = logging.getLogger(__name__)
 
 _BASIS_BLOCK = 1 << 15  # aperture pixels per block when evaluating the basis
 _NOISE_POOL_EXTRA = 1 << 18  # spare noise samples: the random offset of a frame's noise slice
-
-
-def _readonly(array: NDArray) -> NDArray:
-    """Mark ``array`` read-only and return it (results are shared, never copied)."""
-    array.flags.writeable = False
-    return array
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,9 +170,7 @@ class TestOptic:
     def __init__(self, settings: OpticSettings, height: int, width: int) -> None:
         if not isinstance(settings, OpticSettings):
             raise ValueError(f"settings: expected OpticSettings, got {type(settings).__name__}")
-        for name, value in (("height", height), ("width", width)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 2:
-                raise ValueError(f"{name}: expected an integer >= 2 pixels, got {value!r}")
+        check_image_size(height, width, 2)
         self._settings = settings
         self._size = (int(height), int(width))
         self._modes = tuple(mode_list("noll", len(settings.zernike_waves)))
@@ -193,7 +186,7 @@ class TestOptic:
         if settings.noise_rms > 0:
             pool = self._rng.standard_normal(pixels + _NOISE_POOL_EXTRA, dtype=np.float32)
             pool *= np.float32(settings.noise_rms * settings.full_scale)
-            self._noise = _readonly(pool)
+            self._noise = read_only(pool)
         self._rendering = self._prepare(settings.aperture, revision=0)
 
     # ----------------------------------------------------------------------------- properties
@@ -235,9 +228,9 @@ class TestOptic:
 
     def coefficients(self, time_s: float) -> NDArray[np.float64]:
         """``c(t) = zernike_waves + t drift_waves_per_s``, shape (J,), waves."""
-        t = _finite(time_s, "time_s")
+        t = finite_number(time_s, "time_s")
         values = self._coefficients if self._drift is None else self._coefficients + t * self._drift
-        return _readonly(values.copy())
+        return read_only(values.copy())
 
     # ----------------------------------------------------------------------------- aperture
 
@@ -283,22 +276,22 @@ class TestOptic:
         for k in range(len(vectors)):
             values = np.full((height, width), np.nan)
             values[rows, cols] = products[:, k]
-            maps.append(_readonly(values))
+            maps.append(read_only(values))
         ny, nx = np.indices((height, width), dtype=np.float64) if any(settings.carrier_cycles) else (0.0, 0.0)
         carrier = 2.0 * np.pi * (settings.carrier_cycles[0] * nx / width - settings.carrier_cycles[1] * ny / height)
         # wrapped before the cast: float32 then holds the phase to 2.4e-7 rad whatever its size
         phase = np.mod(2.0 * np.pi * np.where(mask, maps[0], 0.0) + carrier, 2.0 * np.pi).astype(np.float32)
         phase_drift = None
         if len(maps) > 1:
-            phase_drift = _readonly((2.0 * np.pi * np.where(mask, maps[1], 0.0)).astype(np.float32))
+            phase_drift = read_only((2.0 * np.pi * np.where(mask, maps[1], 0.0)).astype(np.float32))
         scale = settings.full_scale
         amplitude = np.where(mask, np.float32(settings.modulation * scale), np.float32(0.0))
         offset = np.where(mask, np.float32(settings.background * scale), np.float32(settings.halo * scale))
         return _Rendering(
-            shape=shape, revision=revision, mask=_readonly(mask), pupil=(cx, cy, radius),
+            shape=shape, revision=revision, mask=read_only(mask), pupil=(cx, cy, radius),
             wavefront=maps[0], wavefront_drift=maps[1] if len(maps) > 1 else None,
-            phase=_readonly(phase), phase_drift=phase_drift,
-            amplitude=_readonly(amplitude), offset=_readonly(offset),
+            phase=read_only(phase), phase_drift=phase_drift,
+            amplitude=read_only(amplitude), offset=read_only(offset),
         )
 
     # ----------------------------------------------------------------------------- frames
@@ -315,7 +308,7 @@ class TestOptic:
         -------
         OpticTruth
         """
-        return self._truth(self._rendering, _finite(time_s, "time_s"), 0.0, 0.0, (0.0, 0.0))
+        return self._truth(self._rendering, finite_number(time_s, "time_s"), 0.0, 0.0, (0.0, 0.0))
 
     def interferogram(self, time_s: float, phase_shift_rad: float = 0.0) -> tuple[NDArray, OpticTruth]:
         """Render one interferogram.
@@ -333,8 +326,8 @@ class TestOptic:
         truth : OpticTruth
             With the shift and vibration applied to this frame.
         """
-        t = _finite(time_s, "time_s")
-        shift = _finite(phase_shift_rad, "phase_shift_rad")
+        t = finite_number(time_s, "time_s")
+        shift = finite_number(phase_shift_rad, "phase_shift_rad")
         settings = self._settings
         with self._lock:
             rendering = self._rendering
@@ -366,7 +359,7 @@ class TestOptic:
     ) -> OpticTruth:
         wavefront = rendering.wavefront
         if rendering.wavefront_drift is not None and t != 0.0:
-            wavefront = _readonly(wavefront + t * rendering.wavefront_drift)
+            wavefront = read_only(wavefront + t * rendering.wavefront_drift)
         return OpticTruth(
             time_s=t,
             modes=self._modes,

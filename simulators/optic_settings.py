@@ -10,18 +10,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-import numpy as np
-
-from wavestack.simulators.aperture_shape import ApertureShape, _finite, _pair
+from wavestack.simulators._checks import check_bit_depth, check_seed, finite_number, nonnegative_number, number_pair
+from wavestack.simulators.aperture_shape import ApertureShape
 
 BitDepth = Literal[8, 12, 16]
-
-
-def _nonnegative(value: object, name: str) -> float:
-    number = _finite(value, name)
-    if number < 0:
-        raise ValueError(f"{name}: expected a number >= 0, got {value!r}")
-    return number
 
 
 @dataclass(frozen=True)
@@ -83,21 +75,19 @@ class OpticSettings:
         if len(self.zernike_waves) < 1:
             raise ValueError("zernike_waves: expected at least one Noll coefficient (piston first)")
         for index, value in enumerate(self.zernike_waves):
-            _finite(value, f"zernike_waves[{index}]")
+            finite_number(value, f"zernike_waves[{index}]")
         if len(self.drift_waves_per_s) not in (0, len(self.zernike_waves)):
             raise ValueError(
                 f"drift_waves_per_s: expected {len(self.zernike_waves)} values (one per coefficient) "
                 f"or none, got {len(self.drift_waves_per_s)}"
             )
         for index, value in enumerate(self.drift_waves_per_s):
-            _finite(value, f"drift_waves_per_s[{index}]")
-        _pair(self.carrier_cycles, "carrier_cycles")
+            finite_number(value, f"drift_waves_per_s[{index}]")
+        number_pair(self.carrier_cycles, "carrier_cycles")
         for name in ("background", "modulation", "halo", "noise_rms", "vibration_rms_rad", "vibration_hz"):
-            _nonnegative(getattr(self, name), name)
-        if self.bit_depth not in (8, 12, 16) or isinstance(self.bit_depth, bool):
-            raise ValueError(f"bit_depth: expected 8, 12 or 16, got {self.bit_depth!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ValueError(f"seed: expected an integer >= 0, got {self.seed!r}")
+            nonnegative_number(getattr(self, name), name)
+        check_bit_depth(self.bit_depth)
+        check_seed(self.seed)
 
     @property
     def full_scale(self) -> int:

@@ -28,7 +28,7 @@ from typing import Any
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
-from wavestack.simulators.mdt693b.device import MDT693BDevice, MDT693BPersonality
+from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality
 from wavestack.simulators.serial_registry import find_simulated_device
 
 _MODELS = {"mdt693b": "MDT693B", "mdt694b": "MDT694B"}

@@ -55,30 +55,14 @@ from numpy.typing import NDArray
 
 from wavestack.pipeline import zernike_gradient
 
-from .optic import BitDepth, TestOptic
+from wavestack.simulators._checks import (check_bit_depth, check_image_size, check_seed, finite_number, is_integer,
+                                          read_only)
+from wavestack.simulators.optic import BitDepth, TestOptic
 
 logger = logging.getLogger(__name__)
 
 _NOISE_POOL_EXTRA = 1 << 18  # spare noise samples: the random offset of a frame's noise slice
 _PATCH_SIGMAS = 4.0  # spot patches reach this many sigma from the spot centre
-
-
-def _number(value: object, name: str, minimum: float | None = None, above: float | None = None) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name}: expected a number, got {value!r}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ValueError(f"{name}: expected a finite number, got {value!r}")
-    if minimum is not None and number < minimum:
-        raise ValueError(f"{name}: expected >= {minimum}, got {value!r}")
-    if above is not None and number <= above:
-        raise ValueError(f"{name}: expected > {above}, got {value!r}")
-    return number
-
-
-def _readonly(array: NDArray) -> NDArray:
-    array.flags.writeable = False
-    return array
 
 
 @dataclass(frozen=True)
@@ -140,30 +124,28 @@ class LensletArraySettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        _number(self.pitch_px, "pitch_px", minimum=4.0)
+        finite_number(self.pitch_px, "pitch_px", minimum=4.0)
         for index, value in enumerate(self.offset_px):
-            _number(value, f"offset_px[{index}]", minimum=-0.5)
+            finite_number(value, f"offset_px[{index}]", minimum=-0.5)
         if len(self.offset_px) != 2 or len(self.pupil_shift_px) != 2:
             raise ValueError("offset_px and pupil_shift_px: expected (col, row) pairs")
         if self.grid_shape is not None:
             if len(self.grid_shape) != 2 or any(
-                isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1 for n in self.grid_shape
+                not is_integer(n) or n < 1 for n in self.grid_shape
             ):
                 raise ValueError(f"grid_shape: expected (rows, cols) >= 1 or None, got {self.grid_shape!r}")
         for name in ("gain_px", "spot_sigma_px", "magnification"):
-            _number(getattr(self, name), name, above=0.0)
+            finite_number(getattr(self, name), name, above=0.0)
         for name in ("spot_peak", "background", "noise_rms"):
-            _number(getattr(self, name), name, minimum=0.0)
-        if not 0.0 < _number(self.min_fill, "min_fill") <= 1.0:
+            finite_number(getattr(self, name), name, minimum=0.0)
+        if not 0.0 < finite_number(self.min_fill, "min_fill") <= 1.0:
             raise ValueError(f"min_fill: expected a fraction in (0, 1], got {self.min_fill!r}")
         if isinstance(self.fill_samples, bool) or not isinstance(self.fill_samples, int) or self.fill_samples < 2:
             raise ValueError(f"fill_samples: expected an integer >= 2, got {self.fill_samples!r}")
         for index, value in enumerate(self.pupil_shift_px):
-            _number(value, f"pupil_shift_px[{index}]")
-        if self.bit_depth not in (8, 12, 16) or isinstance(self.bit_depth, bool):
-            raise ValueError(f"bit_depth: expected 8, 12 or 16, got {self.bit_depth!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)) or self.seed < 0:
-            raise ValueError(f"seed: expected an integer >= 0, got {self.seed!r}")
+            finite_number(value, f"pupil_shift_px[{index}]")
+        check_bit_depth(self.bit_depth)
+        check_seed(self.seed)
 
     @staticmethod
     def gain_for(focal_length_um: float, pixel_um: float, wavelength_um: float) -> float:
@@ -179,9 +161,9 @@ class LensletArraySettings:
         float
             Pixels of displacement per wave-per-pixel of slope.
         """
-        focal = _number(focal_length_um, "focal_length_um", above=0.0)
-        pixel = _number(pixel_um, "pixel_um", above=0.0)
-        wavelength = _number(wavelength_um, "wavelength_um", above=0.0)
+        focal = finite_number(focal_length_um, "focal_length_um", above=0.0)
+        pixel = finite_number(pixel_um, "pixel_um", above=0.0)
+        wavelength = finite_number(wavelength_um, "wavelength_um", above=0.0)
         return focal * wavelength / pixel**2
 
 
@@ -267,9 +249,7 @@ class SpotRenderer:
             raise ValueError(f"optic: expected a TestOptic, got {type(optic).__name__}")
         if not isinstance(lenslets, LensletArraySettings):
             raise ValueError(f"lenslets: expected LensletArraySettings, got {type(lenslets).__name__}")
-        for name, value in (("height", height), ("width", width)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 8:
-                raise ValueError(f"{name}: expected an integer >= 8 pixels, got {value!r}")
+        check_image_size(height, width, 8)
         self._optic = optic
         self._lenslets = lenslets
         self._size = (int(height), int(width))
@@ -285,7 +265,7 @@ class SpotRenderer:
         centres = np.empty((*self._grid_shape, 2))
         centres[..., 0] = col0 + (np.arange(shape[1]) + 0.5)[None, :] * pitch
         centres[..., 1] = row0 + (np.arange(shape[0]) + 0.5)[:, None] * pitch
-        self._centres = _readonly(centres.reshape(-1, 2))
+        self._centres = read_only(centres.reshape(-1, 2))
         self._patch = 2 * math.ceil(_PATCH_SIGMAS * lenslets.spot_sigma_px) + 1
         if self._patch > min(self._size):
             raise ValueError(f"spot_sigma_px: spots of {self._patch} px do not fit in the frame")
@@ -296,7 +276,7 @@ class SpotRenderer:
         if lenslets.noise_rms > 0:
             pool = self._rng.standard_normal(height * width + _NOISE_POOL_EXTRA, dtype=np.float32)
             pool *= np.float32(lenslets.noise_rms * self._full_scale)
-            self._noise = _readonly(pool)
+            self._noise = read_only(pool)
         self._cache: _Subapertures | None = None
 
     @property
@@ -358,10 +338,10 @@ class SpotRenderer:
         return _Subapertures(
             revision=revision,
             pupil=camera_pupil,
-            fill=_readonly(fill),
-            valid=_readonly(fill >= settings.min_fill - 1e-12),
-            grad_x=_readonly(sums[0] * scale),
-            grad_y=_readonly(sums[1] * scale),
+            fill=read_only(fill),
+            valid=read_only(fill >= settings.min_fill - 1e-12),
+            grad_x=read_only(sums[0] * scale),
+            grad_y=read_only(sums[1] * scale),
         )
 
     def spot_frame(self, time_s: float) -> tuple[NDArray, SpotTruth]:
@@ -377,7 +357,7 @@ class SpotRenderer:
         frame : ndarray of uint8 (8 bits) or uint16, shape (height, width)
         truth : SpotTruth
         """
-        t = _number(time_s, "time_s")
+        t = finite_number(time_s, "time_s")
         settings = self._lenslets
         geometry = self._subapertures()
         coefficients = self._optic.coefficients(t)
@@ -400,9 +380,9 @@ class SpotRenderer:
             pupil_px=geometry.pupil,
             grid_shape=self._grid_shape,
             centres_px=self._centres,
-            slopes_waves_per_px=_readonly(slopes),
-            displacements_px=_readonly(displacements),
-            positions_px=_readonly(positions),
+            slopes_waves_per_px=read_only(slopes),
+            displacements_px=read_only(displacements),
+            positions_px=read_only(positions),
             fill=geometry.fill,
             valid=geometry.valid,
             aperture_revision=geometry.revision,

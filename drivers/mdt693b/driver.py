@@ -17,7 +17,6 @@ That also recovers a controller that was power-cycled (echo back on) behind the 
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from collections.abc import Iterator, Sequence
@@ -27,6 +26,7 @@ from types import TracebackType
 
 import serial
 
+from wavestack.drivers._checks import is_finite_real
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, LimitError, ProtocolError
 from wavestack.drivers.mdt693b.limits import AxisLimits, _effective_limits, _on_wire
 from wavestack.drivers.mdt693b.protocol import (
@@ -281,7 +281,7 @@ class MDT693B:
             As for every exchange.
         """
         self._check_axis(axis)
-        if isinstance(volts, bool) or not isinstance(volts, (int, float)) or not math.isfinite(volts):
+        if not is_finite_real(volts):
             raise ValueError(f"{self.name}: voltage must be a finite number, got {volts!r}")
         deadline = time.monotonic() + timeout_s
         with self._lock:

@@ -38,6 +38,7 @@ import math
 import re
 from dataclasses import dataclass
 
+from wavestack.drivers._checks import is_finite_real
 from wavestack.drivers.errors import ProtocolError
 
 #: Command terminator the host sends.
@@ -155,9 +156,14 @@ def encode_set_voltage(axis: str, volts: float) -> bytes:
     ------
     ValueError
         Unknown axis or a non-finite or negative voltage.
+
+    Examples
+    --------
+    >>> encode_set_voltage("x", 12.345)
+    b'xvoltage=12.35\\r'
     """
     _check_axis(axis)
-    if not isinstance(volts, (int, float)) or isinstance(volts, bool) or not math.isfinite(volts) or volts < 0:
+    if not is_finite_real(volts) or volts < 0:
         raise ValueError(f"voltage must be a finite number >= 0 V, got {volts!r}")
     return encode_command(f"{axis}voltage={float(volts):.2f}")
 

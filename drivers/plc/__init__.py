@@ -7,6 +7,8 @@
 - :mod:`.driver`: :class:`PolishingLink`, heartbeat, command handshake, self-check, re-arm.
 """
 
+from __future__ import annotations
+
 from wavestack.drivers.plc.codec import (
     WORD_ORDERS,
     WordOrder,
@@ -20,7 +22,7 @@ from wavestack.drivers.plc.codec import (
 )
 from wavestack.drivers.plc.driver import HeartbeatEchoStale, PolishingLink
 from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused
-from wavestack.drivers.plc.status import CommandAck, MachineOutputs, PlcStatus, StatusBit
+from wavestack.drivers.plc.status import CommandAck, MachineOutputs, PlcStatus, StatusBit, decode_outputs, decode_status
 from wavestack.drivers.plc.transport import LinkTiming, PlcRefused
 
 __all__ = [
@@ -39,6 +41,8 @@ __all__ = [
     "WriteRefused",
     "decode_float32",
     "decode_float32_array",
+    "decode_outputs",
+    "decode_status",
     "decode_uint32",
     "encode_float32",
     "encode_float32_array",

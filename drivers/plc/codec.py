@@ -28,6 +28,8 @@ from typing import Literal, get_args
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wavestack.drivers._checks import is_integral_in
+
 __all__ = [
     "WORD_ORDERS",
     "WordOrder",
@@ -72,7 +74,7 @@ def _registers_to_bytes(registers: Sequence[int], order: str) -> bytes:
     if len(registers) != 2:
         raise ValueError(f"a 32-bit value needs exactly 2 registers, got {len(registers)}")
     for register in registers:
-        if isinstance(register, bool) or not 0 <= int(register) <= 0xFFFF or int(register) != register:
+        if not is_integral_in(register, 0, 0xFFFF):
             raise ValueError(f"register value {register!r} is not a 16-bit unsigned integer")
     wire = bytes((int(registers[0]) >> 8, int(registers[0]) & 0xFF, int(registers[1]) >> 8, int(registers[1]) & 0xFF))
     value_bytes = bytearray(4)
@@ -100,6 +102,15 @@ def encode_float32(value: float, order: WordOrder) -> tuple[int, int]:
     ------
     ValueError
         Unknown order, or a finite value beyond the float32 range (about 3.4e38).
+
+    Examples
+    --------
+    1.0 is ``0x3F800000`` in float32; ``"CDAB"`` sends the low word first:
+
+    >>> encode_float32(1.0, "ABCD"), encode_float32(1.0, "CDAB")
+    ((16256, 0), (0, 16256))
+    >>> decode_float32((0, 16256), "CDAB")
+    1.0
     """
     try:
         packed = struct.pack(">f", float(value))
@@ -133,7 +144,7 @@ def decode_float32(registers: Sequence[int], order: WordOrder) -> float:
 
 def encode_uint32(value: int, order: WordOrder) -> tuple[int, int]:
     """Two registers holding an unsigned 32-bit integer (0 .. 2**32 - 1); see :func:`encode_float32`."""
-    if isinstance(value, bool) or int(value) != value or not 0 <= int(value) <= 0xFFFFFFFF:
+    if not is_integral_in(value, 0, 0xFFFFFFFF):
         raise ValueError(f"{value!r} is not an unsigned 32-bit integer")
     return _bytes_to_registers(int(value).to_bytes(4, "big"), order)
 

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from wavestack.drivers._checks import is_integral_in
 from wavestack.drivers.errors import LimitError
 from wavestack.drivers.plc.codec import WORD_ORDERS, WordOrder, encode_float32_array
 
@@ -320,9 +321,9 @@ class RegisterMap:
         ValueError
             An id or pass count out of range, a wrong shape or a non-finite removal.
         """
-        if isinstance(command_id, bool) or int(command_id) != command_id or not 1 <= command_id <= 0xFFFF:
+        if not is_integral_in(command_id, 1, 0xFFFF):
             raise ValueError(f"command_id must be an integer 1..65535 (0 means none), got {command_id!r}")
-        if isinstance(passes, bool) or int(passes) != passes or not 1 <= passes <= 0xFFFF:
+        if not is_integral_in(passes, 1, 0xFFFF):
             raise ValueError(f"passes must be an integer 1..65535, got {passes!r}")
         values = np.asarray(removal_nm, dtype=np.float64)
         if values.shape != (self.n_terms,):

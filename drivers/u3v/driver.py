@@ -23,6 +23,7 @@ from typing import Any
 import usb.core
 import usb.util
 
+from wavestack.drivers._checks import check_timeout
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, LimitError, ProtocolError
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import FrameRing, RingPolicy
@@ -39,11 +40,6 @@ __all__ = ["CONTROL_PROTOCOL", "STREAM_PROTOCOL", "U3V_CLASS", "U3V_SUBCLASS", "
 logger = logging.getLogger(__name__)
 
 
-def _check_timeout(timeout_s: float) -> None:
-    if not (math.isfinite(timeout_s) and timeout_s > 0):
-        raise ValueError(f"timeout_s must be a finite number > 0, got {timeout_s}")
-
-
 class U3VCamera:
     """A USB3 Vision camera (GenCP control + one image stream) driven through pyusb.
 
@@ -54,7 +50,7 @@ class U3VCamera:
 
     def __init__(self, *, backend: Any, serial: str | None, timeout_s: float, ring_capacity: int,
                  ring_policy: RingPolicy) -> None:
-        _check_timeout(timeout_s)
+        check_timeout(timeout_s)
         self._backend = backend
         self._serial = serial
         self._timeout_s = timeout_s
@@ -143,7 +139,7 @@ class U3VCamera:
     # ---------------------------------------------------------------------------------- features
     def _deadline(self, timeout_s: float | None) -> float:
         timeout = self._timeout_s if timeout_s is None else timeout_s
-        _check_timeout(timeout)
+        check_timeout(timeout)
         return time.monotonic() + timeout
 
     def _read_feature(self, name: str, deadline: float) -> int | float:

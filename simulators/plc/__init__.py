@@ -7,6 +7,8 @@
 - :mod:`.polishing`: the polishing-station model a removal command acts on.
 """
 
+from __future__ import annotations
+
 from wavestack.simulators.plc.faults import SimFaults
 from wavestack.simulators.plc.polishing import PolishingPass, PolishingStation, RemovalCommand
 from wavestack.simulators.plc.program import PlcSimLayout, PolishingPlcProgram, SimOutputs

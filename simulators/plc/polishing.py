@@ -39,6 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from wavestack.simulators._checks import is_integer, is_number, read_only_copy
+
 __all__ = ["MAX_COMMAND_ID", "MAX_PASSES", "PolishingPass", "PolishingStation", "RemovalCommand"]
 
 _log = logging.getLogger(__name__)
@@ -101,15 +103,9 @@ class PolishingPass:
     removed_nm: NDArray[np.float64]
 
 
-def _read_only(values: NDArray[np.float64]) -> NDArray[np.float64]:
-    out = np.array(values, dtype=np.float64)
-    out.setflags(write=False)
-    return out
-
-
 def _check_number(name: str, value: float, low: float, high: float, *, low_open: bool = False) -> float:
     """``value`` as float if in range (``low < value`` when ``low_open``), else ValueError naming it."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+    if not is_number(value):
         raise ValueError(f"PolishingStation: {name} must be a number, got {value!r}")
     number = float(value)
     ok = math.isfinite(number) and (low < number if low_open else low <= number) and number <= high
@@ -120,8 +116,7 @@ def _check_number(name: str, value: float, low: float, high: float, *, low_open:
 
 
 def _check_command_id(command_id: object) -> None:
-    ok = isinstance(command_id, (int, np.integer)) and not isinstance(command_id, bool)
-    if not (ok and 0 <= int(command_id) <= MAX_COMMAND_ID):  # type: ignore[call-overload]
+    if not (is_integer(command_id) and 0 <= int(command_id) <= MAX_COMMAND_ID):  # type: ignore[call-overload]
         raise ValueError(
             f"PolishingStation: command_id must be an integer in [0, {MAX_COMMAND_ID}], got {command_id!r}"
         )
@@ -229,8 +224,7 @@ class PolishingStation:
         """
         _check_command_id(command.command_id)
         passes = command.passes
-        is_integer = isinstance(passes, (int, np.integer)) and not isinstance(passes, bool)
-        if not (is_integer and 1 <= passes <= MAX_PASSES):
+        if not (is_integer(passes) and 1 <= passes <= MAX_PASSES):
             raise ValueError(
                 f"PolishingStation: passes must be an integer in [1, {MAX_PASSES}], got {passes!r}"
             )
@@ -291,9 +285,9 @@ class PolishingStation:
             command_id = int(command.command_id)
             result = PolishingPass(
                 command_id=command_id,
-                surface_before_nm=_read_only(before),
-                surface_after_nm=_read_only(after),
-                removed_nm=_read_only(before - after),
+                surface_before_nm=read_only_copy(before),
+                surface_after_nm=read_only_copy(after),
+                removed_nm=read_only_copy(before - after),
             )
             self._done[command_id] = (command, result)
             self._surface = after

@@ -9,15 +9,19 @@ GenICam XML, leader/payload/trailer streaming) and is written independently of t
 simulate the cable.
 """
 
-from .backend import SimulatedUsbBackend, usb_error
-from .camera import SimulatedU3VCamera
-from .descriptors import (EP_ACK_IN, EP_COMMAND_OUT, EP_STREAM_IN, SIM_PRODUCT_ID, SIM_VENDOR_ID, U3V_CLASS,
-                          U3V_SUBCLASS, U3VDescriptorSet, u3v_descriptors)
-from .device_description import FEATURES, FeatureSpec
-from .genicam_xml import genicam_xml
-from .register_map import GenCPStatus
-from .settings import CorruptionKind, FrameRenderer, U3VSimCounters, U3VSimFaults, U3VSimSettings
-from .stream_device import PIXEL_FORMATS
+from __future__ import annotations
+
+from wavestack.simulators.u3v.backend import SimulatedUsbBackend, usb_error
+from wavestack.simulators.u3v.camera import SimulatedU3VCamera
+from wavestack.simulators.u3v.descriptors import (EP_ACK_IN, EP_COMMAND_OUT, EP_STREAM_IN, SIM_PRODUCT_ID,
+                                                  SIM_VENDOR_ID, U3V_CLASS, U3V_SUBCLASS, U3VDescriptorSet,
+                                                  u3v_descriptors)
+from wavestack.simulators.u3v.device_description import FEATURES, FeatureSpec
+from wavestack.simulators.u3v.genicam_xml import genicam_xml
+from wavestack.simulators.u3v.register_map import GenCPStatus
+from wavestack.simulators.u3v.settings import (CorruptionKind, FrameRenderer, U3VSimCounters, U3VSimFaults,
+                                               U3VSimSettings)
+from wavestack.simulators.u3v.stream_device import PIXEL_FORMATS
 
 __all__ = [
     "EP_ACK_IN", "EP_COMMAND_OUT", "EP_STREAM_IN", "FEATURES", "PIXEL_FORMATS", "SIM_PRODUCT_ID", "SIM_VENDOR_ID",

@@ -31,10 +31,11 @@ from typing import Any
 import usb.backend
 import usb.core
 
-from .camera import SimulatedU3VCamera
-from .descriptors import (EP_ACK_IN, EP_COMMAND_OUT, EP_STREAM_IN, DeviceUnplugged, EndpointDescriptor,
-                          EndpointHalted, InterfaceDescriptor, TransferError, TransferOverflow, TransferTimeout,
-                          U3VDescriptorSet, u3v_descriptors)
+from wavestack.simulators.u3v.camera import SimulatedU3VCamera
+from wavestack.simulators.u3v.descriptors import (EP_ACK_IN, EP_COMMAND_OUT, EP_STREAM_IN, DeviceUnplugged,
+                                                  EndpointDescriptor, EndpointHalted, InterfaceDescriptor,
+                                                  TransferError, TransferOverflow, TransferTimeout,
+                                                  U3VDescriptorSet, u3v_descriptors)
 
 _log = logging.getLogger(__name__)
 

@@ -18,13 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from .descriptors import EP_STREAM_IN, DeviceUnplugged, EndpointHalted, TransferOverflow, TransferTimeout
-from .gencp_device import GenCPDevice
-from .registers import DeviceIdentity, GenCPStatus, build_register_map
-from .settings import (MAX_IMAGE_SIDE, CorruptionKind, FrameRenderer, U3VSimCounters, U3VSimFaults,
-                       U3VSimSettings)
-from .stream_device import (PIXEL_FORMATS, SI_CONTROL, FrameScheduler, ImageFormat, ScheduledFrame, StreamInterface,
-                            corrupt_transfer, encode_payload)
+from wavestack.simulators.u3v.descriptors import (EP_STREAM_IN, DeviceUnplugged, EndpointHalted, TransferOverflow,
+                                                  TransferTimeout)
+from wavestack.simulators.u3v.gencp_device import GenCPDevice
+from wavestack.simulators.u3v.registers import DeviceIdentity, GenCPStatus, build_register_map
+from wavestack.simulators.u3v.settings import (MAX_IMAGE_SIDE, CorruptionKind, FrameRenderer, U3VSimCounters,
+                                               U3VSimFaults, U3VSimSettings)
+from wavestack.simulators.u3v.stream_device import (PIXEL_FORMATS, SI_CONTROL, FrameScheduler, ImageFormat,
+                                                    ScheduledFrame, StreamInterface, corrupt_transfer,
+                                                    encode_payload)
 
 __all__ = ["MAX_IMAGE_SIDE", "TRUTH_HISTORY", "CorruptionKind", "FrameRenderer", "SimulatedU3VCamera",
            "U3VSimCounters", "U3VSimFaults", "U3VSimSettings"]

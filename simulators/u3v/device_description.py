@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from .register_map import AccessMode
+from wavestack.simulators.u3v.register_map import AccessMode
 
 FEATURE_BASE_ADDRESS = 0x0001_0000
 

@@ -31,7 +31,7 @@ import struct
 from collections import deque
 from dataclasses import dataclass
 
-from .registers import GenCPStatus, RegisterMap
+from wavestack.simulators.u3v.registers import GenCPStatus, RegisterMap
 
 _log = logging.getLogger(__name__)
 

@@ -11,7 +11,7 @@ import uuid
 import xml.etree.ElementTree as ET
 import zipfile
 
-from .device_description import FEATURES, DeviceIdentity, FeatureSpec
+from wavestack.simulators.u3v.device_description import FEATURES, DeviceIdentity, FeatureSpec
 
 GENICAM_NAMESPACE = "http://www.genicam.org/GenApi/Version_1_1"
 XML_FILE_NAME = "wavestack_sim_u3v.xml"

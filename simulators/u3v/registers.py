@@ -33,10 +33,11 @@ import struct
 from collections.abc import Callable
 from typing import Protocol
 
-from .device_description import (FEATURE_BASE_ADDRESS, FEATURES, PIXEL_FORMAT_ENTRIES, DeviceIdentity, FeatureKind,
-                                 FeatureSpec)
-from .genicam_xml import FILE_TYPE_XML, FILE_TYPE_ZIP, GENICAM_NAMESPACE, XML_FILE_NAME, genicam_xml, manifest_file
-from .register_map import AccessMode, GenCPStatus, Register, RegisterMap
+from wavestack.simulators.u3v.device_description import (FEATURE_BASE_ADDRESS, FEATURES, PIXEL_FORMAT_ENTRIES,
+                                                         DeviceIdentity, FeatureKind, FeatureSpec)
+from wavestack.simulators.u3v.genicam_xml import (FILE_TYPE_XML, FILE_TYPE_ZIP, GENICAM_NAMESPACE, XML_FILE_NAME,
+                                                  genicam_xml, manifest_file)
+from wavestack.simulators.u3v.register_map import AccessMode, GenCPStatus, Register, RegisterMap
 
 __all__ = [
     "ABRM_ADDRESS", "FEATURE_BASE_ADDRESS", "FEATURES", "FILE_TYPE_XML", "FILE_TYPE_ZIP", "GENICAM_NAMESPACE",

@@ -13,8 +13,8 @@ from typing import Any, Literal, Protocol
 
 from numpy.typing import NDArray
 
-from .descriptors import SIM_PRODUCT_ID, SIM_VENDOR_ID
-from .stream_device import PIXEL_FORMATS
+from wavestack.simulators.u3v.descriptors import SIM_PRODUCT_ID, SIM_VENDOR_ID
+from wavestack.simulators.u3v.stream_device import PIXEL_FORMATS
 
 MAX_IMAGE_SIDE = 16384
 CorruptionKind = Literal["magic", "block_id", "size"]

@@ -26,7 +26,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from .registers import GenCPStatus
+from wavestack.simulators.u3v.registers import GenCPStatus
 
 LEADER_MAGIC = 0x4C563355
 TRAILER_MAGIC = 0x54563355

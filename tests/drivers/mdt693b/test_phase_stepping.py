@@ -9,11 +9,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from wavestack.drivers.errors import LimitError
-from wavestack.drivers.frames import Frame
+from wavestack.drivers import Frame, LimitError
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration, TriggeredFrameSource, acquire_phase_steps
 from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality
-from wavestack.simulators.serial_registry import attach_simulated_device, register_serial_simulators
+from wavestack.simulators import attach_simulated_device, register_serial_simulators
 
 CALIBRATION = PhaseStepCalibration(volts_per_radian=2.0, bias_v=50.0)
 FOUR_STEPS = (0.0, math.pi / 2, math.pi, 3 * math.pi / 2)

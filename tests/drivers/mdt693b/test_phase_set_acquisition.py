@@ -14,7 +14,7 @@ from wavestack.drivers.u3v import U3VCamera
 from wavestack.simulators.bench import PiezoCoupling, SimulatedInterferometer
 from wavestack.simulators.mdt693b import MDT693BDevice
 from wavestack.simulators.optic import ApertureShape, OpticSettings, TestOptic
-from wavestack.simulators.serial_registry import attach_simulated_device, register_serial_simulators
+from wavestack.simulators import attach_simulated_device, register_serial_simulators
 from wavestack.simulators.u3v import U3VSimSettings
 
 HEIGHT, WIDTH = 96, 128

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wavestack.drivers.plc.codec import (
+from wavestack.drivers.plc import (
     WORD_ORDERS,
     decode_float32,
     decode_float32_array,

@@ -9,10 +9,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wavestack.drivers.errors import LimitError
-from wavestack.drivers.plc.codec import decode_float32_array, encode_float32_array
-from wavestack.drivers.plc.register_map import RegisterMap, WriteRefused
-from wavestack.drivers.plc.status import decode_outputs, decode_status
+from wavestack.drivers import LimitError
+from wavestack.drivers.plc import (RegisterMap, WriteRefused, decode_float32_array, decode_outputs, decode_status,
+                                   encode_float32_array)
 
 N_TERMS = 4
 

@@ -15,9 +15,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from wavestack.drivers.errors import DeviceDisconnected, DeviceTimeout, LimitError, ProtocolError
-from wavestack.drivers.frames import Frame, FrameSource
-from wavestack.drivers.ring import RingPolicy
+from wavestack.drivers import (DeviceDisconnected, DeviceTimeout, Frame, FrameSource, LimitError, ProtocolError,
+                               RingPolicy)
 from wavestack.drivers.u3v import U3VCamera
 from wavestack.simulators.u3v import SimulatedU3VCamera, SimulatedUsbBackend, U3VSimSettings
 

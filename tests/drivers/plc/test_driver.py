@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from wavestack.drivers.errors import DeviceDisconnected, DeviceTimeout, ProtocolError
+from wavestack.drivers import DeviceDisconnected, DeviceTimeout, ProtocolError
 from wavestack.drivers.plc import (
     WORD_ORDERS,
     HeartbeatEchoStale,

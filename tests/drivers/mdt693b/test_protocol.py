@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wavestack.drivers.errors import ProtocolError
+from wavestack.drivers import ProtocolError
 from wavestack.drivers.mdt693b.protocol import (
     MAX_REPLY_BYTES,
     PROMPTS,

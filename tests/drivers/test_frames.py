@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, LimitError, ProtocolError
-from wavestack.drivers.frames import Frame, SlopeFrame
+from wavestack.drivers import (DeviceDisconnected, DeviceError, DeviceTimeout, Frame, LimitError, ProtocolError,
+                               SlopeFrame)
 
 
 def test_frame_metadata_is_read_only_and_a_copy() -> None:

@@ -9,10 +9,10 @@ from contextlib import ExitStack, contextmanager
 import pytest
 import serial
 
-from wavestack.drivers.errors import DeviceDisconnected, DeviceTimeout, LimitError, ProtocolError
+from wavestack.drivers import DeviceDisconnected, DeviceTimeout, LimitError, ProtocolError
 from wavestack.drivers.mdt693b import MDT693B
 from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality, PtyBridge
-from wavestack.simulators.serial_registry import attach_simulated_device, register_serial_simulators
+from wavestack.simulators import attach_simulated_device, register_serial_simulators
 
 WIRE_RESOLUTION_V = 0.005  # the driver sends two decimals, so a set voltage is within half a hundredth
 ECHO_GT = MDT693BPersonality(echo=True, prompt=">")

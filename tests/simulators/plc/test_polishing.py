@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from wavestack.simulators.plc.polishing import PolishingPass, PolishingStation, RemovalCommand
+from wavestack.simulators.plc import PolishingPass, PolishingStation, RemovalCommand
 
 N_TERMS = 15  # Noll 1..15
 

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wavestack.drivers.errors import ProtocolError
+from wavestack.drivers import ProtocolError
 from wavestack.drivers.u3v import bootstrap as bs
 from wavestack.drivers.u3v import gencp
 from wavestack.drivers.u3v.genicam import parse_genicam

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wavestack.drivers.safety import SafeOutput, SafetyLimits, SafetyStage, SafetyStatus
+from wavestack.drivers import SafeOutput, SafetyLimits, SafetyStage, SafetyStatus
 
 N = 3
 MAX_AGE_S = 1.0

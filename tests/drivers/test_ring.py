@@ -9,8 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from wavestack.drivers.errors import DeviceDisconnected, DeviceTimeout
-from wavestack.drivers.ring import FrameRing, RingPolicy
+from wavestack.drivers import DeviceDisconnected, DeviceTimeout, FrameRing, RingPolicy
 
 
 def _assert_adds_up(ring: FrameRing) -> None:

@@ -1,0 +1,19 @@
+"""The Examples sections of the device faces run as doctests."""
+
+from __future__ import annotations
+
+import doctest
+from types import ModuleType
+
+import pytest
+
+from wavestack.drivers import safety
+from wavestack.drivers.mdt693b import protocol
+from wavestack.drivers.plc import codec
+
+
+@pytest.mark.parametrize("module", [safety, codec, protocol], ids=lambda m: m.__name__)
+def test_examples_run(module: ModuleType) -> None:
+    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 0, f"{module.__name__} has no Examples to run"
+    assert result.failed == 0
