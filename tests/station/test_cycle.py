@@ -146,3 +146,13 @@ def test_the_output_stage_returns_what_it_sent() -> None:
     assert link.sent == [(1, record.command.values_nm, settings.passes)]
     lost = output.device_lost("device: gone", time.time_ns())
     assert lost.heartbeat is None and not lost.sent and "HELD" in lost.command.status
+
+
+def test_with_output_measures_the_latency_to_the_end_of_the_send() -> None:
+    result = make_result(0, FRAMES, _slope_outcome(), ordering="noll", counters=Counters(1, 1, 0),
+                         now_ns=1_050_000_000)
+    sent = OutputRecord(None, SentCommand(False, None, "OK", None, ()))
+    assert with_output(result, sent).latency_ms == pytest.approx(50.0)
+    later = with_output(result, sent, now_ns=1_052_000_000)
+    assert later.latency_ms == pytest.approx(52.0) and later.output is sent
+    assert with_output(result, None, now_ns=1_052_000_000) is result  # nothing sent: the result as made

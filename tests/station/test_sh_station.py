@@ -53,7 +53,7 @@ def _run(station: Station, devices: StationDevices, count: int, hook=None) -> tu
 
     def on_result(record: CycleRecord) -> None:
         truth = devices.truth(record.frames[0]) if record.frames else None
-        records.append((record.result, record.measurement, truth))
+        records.append((record.result, record.lenslets, truth))
         if hook is not None:
             hook(record.result)
 

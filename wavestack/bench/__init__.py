@@ -16,10 +16,10 @@ from wavestack.bench.paper_apertures import (
     rounded_rectangle_mask,
 )
 from wavestack.bench.station import carrier_config, changed_aperture, machine_state, measure_path
-from wavestack.bench.station_figures import STAGES, StationPathFigures, figures_json, format_figures, targets
+from wavestack.bench.station_figures import STAGES, MachineState, StationPathFigures, figures_json, format_figures, targets
 
 __all__ = [
-    "PAPER_APERTURES", "PaperRow", "STAGES", "StationPathFigures", "annulus_circular_hole_mask",
+    "MachineState", "PAPER_APERTURES", "PaperRow", "STAGES", "StationPathFigures", "annulus_circular_hole_mask",
     "annulus_triangular_hole_mask", "butterfly_mask", "carrier_config", "changed_aperture", "figures_json",
     "format_figures", "format_markdown", "machine_state", "measure_path", "rectangle_mask",
     "rounded_rectangle_mask", "rows_as_json", "run_paper_benchmark", "targets",

@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.bench.station_cpu import _instrument, _Mark, _mark, _Meter, _per_result_ms
-from wavestack.bench.station_figures import STAGES, StationPathFigures
+from wavestack.bench.station_figures import STAGES, MachineState, StationPathFigures
 from wavestack.config import StationConfig
 from wavestack.drivers.errors import DeviceError
 from wavestack.simulators.optic import ApertureShape
@@ -58,11 +58,11 @@ WARMUP_LIMIT_S = 90.0
 CHANGE_LIMIT_S = 30.0
 
 
-def machine_state() -> dict[str, Any]:
+def machine_state() -> MachineState:
     """CPUs, the 1-minute load average (other processes share the cores) and the BLAS thread setting."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return {"cpus": os.cpu_count(), "load_average_1min": load,
-            "openblas_num_threads": os.environ.get("OPENBLAS_NUM_THREADS", "unset")}
+    return MachineState(cpus=os.cpu_count(), load_average_1min=load,
+                        openblas_num_threads=os.environ.get("OPENBLAS_NUM_THREADS", "unset"))
 
 
 def carrier_config(config: StationConfig, cycles: tuple[float, float] | None = None) -> StationConfig:

@@ -74,6 +74,18 @@ class StationPathFigures:
 # ---------------------------------------------------------------------------------- output
 
 
+@dataclass(frozen=True)
+class MachineState:
+    """The machine a benchmark ran on: CPUs, the 1-minute load average at the start, the BLAS threads."""
+
+    cpus: int | None
+    load_average_1min: float
+    openblas_num_threads: str
+
+    def to_json(self) -> dict[str, object]:
+        return asdict(self)
+
+
 def targets() -> dict[str, float]:
     """The targets the figures are marked against, by JSON name."""
     return {"carrier_results_per_s_min": TARGET_RESULTS_PER_S, "carrier_latency_p99_ms_max": TARGET_P99_MS,
@@ -102,12 +114,12 @@ def _seconds(value: float | None) -> str:
 
 
 def format_figures(source: str, figures: Sequence[StationPathFigures],
-                   machine: dict[str, Any] | None = None) -> list[str]:
+                   machine: MachineState | None = None) -> list[str]:
     """The figures as text lines, targets beside them (``machine``: see :func:`machine_state`)."""
     lines = [f"wavestack bench station: {source}"]
     if machine is not None:
-        lines.append(f"machine: {machine['cpus']} CPUs, load average {machine['load_average_1min']:.2f} at the "
-                     f"start, OPENBLAS_NUM_THREADS={machine['openblas_num_threads']}")
+        lines.append(f"machine: {machine.cpus} CPUs, load average {machine.load_average_1min:.2f} at the "
+                     f"start, OPENBLAS_NUM_THREADS={machine.openblas_num_threads}")
     row = "{:<24}{:<48}{}".format
     for f in figures:
         carrier = f.path == "carrier"

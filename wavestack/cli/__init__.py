@@ -1,7 +1,8 @@
 """The ``wavestack`` command line: parses arguments and hands each subcommand to its module.
 
-Each command is one module of this package (:data:`COMMANDS`) with a ``register(commands)`` that
-adds its sub-parser and handler. Only this layer prints. Bad input ends in one line on standard
+Each command is one module of this package that declares its
+:class:`~wavestack.cli.command.Command` (name, help, options, handler); :func:`build_parser`
+registers every one of :data:`COMMANDS`. Only this layer prints. Bad input ends in one line on standard
 error and exit status 2, never a traceback; a device failure in exit status 3; an unknown option
 gets argparse's usage error, also status 2.
 """
@@ -30,8 +31,8 @@ from wavestack.pipeline import InputError  # noqa: E402
 EXIT_BAD_INPUT = 2
 EXIT_DEVICE_ERROR = 3
 
-#: The command modules, in the order ``wavestack --help`` lists them.
-COMMANDS = (run, replay, fit, analyze, bench, sim)
+#: The subcommands (each module declares its own), in the order ``wavestack --help`` lists them.
+COMMANDS = tuple(module.COMMAND for module in (run, replay, fit, analyze, bench, sim))
 
 __all__ = ["COMMANDS", "EXIT_BAD_INPUT", "EXIT_DEVICE_ERROR", "build_parser", "main"]
 

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from wavestack.cli.arguments import positive_int
+from wavestack.cli.command import Command
 from wavestack.pipeline import Aperture, InputError, build_fitter
 from wavestack.pipeline import DetectionSettings, detect_aperture
 from wavestack.pipeline import ConicTest, implied_conic_constant, null_wavefront_waves
@@ -32,19 +33,6 @@ def _steps_argument(text: str) -> np.ndarray:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected phase steps in degrees, e.g. 0,60,120, got {text!r}") from None
     return np.deg2rad(values)
-
-
-NAME = "analyze"
-
-
-def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``wavestack analyze`` to the command line."""
-    parser = commands.add_parser(
-        NAME, help="interferograms (a phase-shifted set or one carrier frame) or a .dat/.datx file to Zernike terms",
-        description="Analyse interferograms or instrument files: phase, aperture, unwrap, fit.",
-    )
-    add_analyze_arguments(parser)
-    parser.set_defaults(handler=run_analyze)
 
 
 def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
@@ -213,3 +201,11 @@ def _format(report: dict[str, Any]) -> str:
     for offset, ((n, m), value) in enumerate(zip(report["mode_indices"], report["coefficients_waves"])):
         lines.append(f"{report['first_index'] + offset:>4}  {f'({n}, {m})':>9}  {mode_name(n, m):<24} {value:>10.4f}")
     return "\n".join(lines)
+
+
+COMMAND = Command(
+    "analyze",
+    help="interferograms (a phase-shifted set or one carrier frame) or a .dat/.datx file to Zernike terms",
+    description="Analyse interferograms or instrument files: phase, aperture, unwrap, fit.",
+    add_arguments=add_analyze_arguments, handler=run_analyze,
+)

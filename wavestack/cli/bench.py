@@ -19,21 +19,8 @@ from wavestack.bench import (
     targets,
 )
 from wavestack.cli.arguments import positive_int
+from wavestack.cli.command import Command
 from wavestack.config import load_station_config
-
-NAME = "bench"
-
-
-def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``wavestack bench`` to the command line."""
-    parser = commands.add_parser(
-        NAME, help="run a benchmark and print its figures",
-        description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables, 'station' "
-                    "measures the simulated station (results per second, latency, stages, aperture change).",
-    )
-    add_bench_arguments(parser)
-    parser.set_defaults(handler=run_bench)
-
 
 def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``wavestack bench``."""
@@ -81,8 +68,17 @@ def run_station_bench(args: argparse.Namespace) -> int:
     machine = machine_state()
     figures = [measure_path(name, path_config, args.results) for name, path_config in paths]
     if getattr(args, "json", False):
-        print(json.dumps({"benchmark": "station", "config": config.source, "machine": machine,
+        print(json.dumps({"benchmark": "station", "config": config.source, "machine": machine.to_json(),
                           "targets": targets(), "paths": figures_json(figures)}))
     else:
         print("\n".join(format_figures(config.source, figures, machine)))
     return 0
+
+
+COMMAND = Command(
+    "bench",
+    help="run a benchmark and print its figures",
+    description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables, 'station' "
+                "measures the simulated station (results per second, latency, stages, aperture change).",
+    add_arguments=add_bench_arguments, handler=run_bench,
+)

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from wavestack.cli.arguments import positive_int
+from wavestack.cli.command import Command
 from wavestack.cli.example import synthetic_example
 from wavestack.pipeline import (
     Aperture,
@@ -39,19 +40,6 @@ def _pupil_argument(text: str) -> Pupil:
             f"expected CX,CY,R in pixels (three numbers), got {text!r}"
         ) from None
     return Pupil(cx, cy, r)
-
-
-NAME = "fit"
-
-
-def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``wavestack fit`` to the command line."""
-    parser = commands.add_parser(
-        NAME, help="fit Zernike terms to a wavefront map (.npy)",
-        description="Fit Zernike terms to a 2-D wavefront map (.npy, NaN outside the aperture).",
-    )
-    add_fit_arguments(parser)
-    parser.set_defaults(handler=run_fit)
 
 
 def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
@@ -211,3 +199,10 @@ def format_report(report: dict[str, Any]) -> str:
         lines.append(f"{j:>4}  {f'({n}, {m})':>9}  {mode_name(n, m):<24} {value:>13.6g}")
     return "\n".join(lines)
 
+
+COMMAND = Command(
+    "fit",
+    help="fit Zernike terms to a wavefront map (.npy)",
+    description="Fit Zernike terms to a 2-D wavefront map (.npy, NaN outside the aperture).",
+    add_arguments=add_fit_arguments, handler=run_fit,
+)

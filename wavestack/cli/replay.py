@@ -7,22 +7,10 @@ import json
 import sys
 from pathlib import Path
 
+from wavestack.cli.command import Command
 from wavestack.recording import RecordingReader
 from wavestack.recording.replay import recorded_config, replay
-from wavestack.config.station import load_station_config
-
-
-NAME = "replay"
-
-
-def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``wavestack replay`` to the command line."""
-    parser = commands.add_parser(
-        NAME, help="run the pipeline again on a recording (same or other fit settings)",
-        description="Recompute every result of a recording made with wavestack run --record.",
-    )
-    add_replay_arguments(parser)
-    parser.set_defaults(handler=run_replay)
+from wavestack.config import load_station_config
 
 
 def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
@@ -63,3 +51,11 @@ def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
         out.write(f"{count} results replayed ({valid} valid); {compared} compared with the recording, "
                   f"largest difference {worst:.2e} waves rms\n")
     return 0
+
+
+COMMAND = Command(
+    "replay",
+    help="run the pipeline again on a recording (same or other fit settings)",
+    description="Recompute every result of a recording made with wavestack run --record.",
+    add_arguments=add_replay_arguments, handler=run_replay,
+)

@@ -19,6 +19,7 @@ from typing import TextIO
 import numpy as np
 
 from wavestack.cli.arguments import positive_float, positive_int
+from wavestack.cli.command import Command
 from wavestack.cli.signals import stop_on_signals
 from wavestack.config import load_station_config
 from wavestack.recording import StationRecorder, open_recording
@@ -31,20 +32,6 @@ from wavestack.station import (
     open_station_devices,
     render_live_view,
 )
-
-NAME = "run"
-
-
-def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``wavestack run`` to the command line."""
-    parser = commands.add_parser(
-        NAME, help="run the station (default: the simulated station): stream, refit, record, drive the PLC",
-        description="Run a metrology station: frames -> aperture -> unwrap -> Zernike fit -> results, "
-                    "live view or JSON lines, optional recording, removal commands to the polishing PLC.",
-    )
-    add_run_arguments(parser)
-    parser.set_defaults(handler=run_station)
-
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``wavestack run``."""
@@ -140,3 +127,12 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         out.write("\n".join(_summary_lines(summary)) + "\n")
     out.flush()
     return 0
+
+
+COMMAND = Command(
+    "run",
+    help="run the station (default: the simulated station): stream, refit, record, drive the PLC",
+    description="Run a metrology station: frames -> aperture -> unwrap -> Zernike fit -> results, "
+                "live view or JSON lines, optional recording, removal commands to the polishing PLC.",
+    add_arguments=add_run_arguments, handler=run_station,
+)

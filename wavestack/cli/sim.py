@@ -13,20 +13,8 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
+from wavestack.cli.command import Command
 from wavestack.cli.signals import stop_on_signals
-
-
-NAME = "sim"
-
-
-def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """Add ``wavestack sim`` to the command line."""
-    parser = commands.add_parser(
-        NAME, help="run a simulated instrument standalone (pzt, plc)",
-        description="Run one simulated instrument on its real transport until Ctrl-C or SIGTERM.",
-    )
-    add_sim_arguments(parser)
-    parser.set_defaults(handler=run_sim)
 
 
 def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
@@ -66,3 +54,11 @@ def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         runner()
     print(f"wavestack sim {args.device}: stopped", file=sys.stderr)
     return 0
+
+
+COMMAND = Command(
+    "sim",
+    help="run a simulated instrument standalone (pzt, plc)",
+    description="Run one simulated instrument on its real transport until Ctrl-C or SIGTERM.",
+    add_arguments=add_sim_arguments, handler=run_sim,
+)

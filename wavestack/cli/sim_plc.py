@@ -8,8 +8,7 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
-from wavestack.config.schema import ConfigError
-from wavestack.config.plc import load_plc_config
+from wavestack.config import ConfigError, load_plc_config
 from wavestack.simulators.plc.server import PlcSimulator
 
 __all__ = ["is_loopback", "run_plc_simulator"]

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from wavestack.config.pzt import build_simulated_device, load_pzt_config, parse_pzt_config
+from wavestack.config import build_simulated_device, load_pzt_config, parse_pzt_config
 from wavestack.simulators.mdt693b import PtyBridge
 
 logger = logging.getLogger(__name__)

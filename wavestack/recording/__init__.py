@@ -14,7 +14,7 @@ package re-exports the public names, so ``from wavestack.recording import Record
 
 from __future__ import annotations
 
-from wavestack.recording.format import FORMAT_NAME, FORMAT_VERSION
+from wavestack.recording.format import FORMAT_NAME, FORMAT_VERSION, ResultRow, RowValue
 from wavestack.recording.reader import RecordingReader
 from wavestack.recording.replay import ReplayedResult, recorded_config, replay
 from wavestack.recording.station_rows import (
@@ -27,5 +27,5 @@ from wavestack.recording.station_rows import (
 from wavestack.recording.writer import RecordingWriter
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FRAME_METADATA", "RecordingReader", "RecordingWriter",
-           "ReplayedResult", "StationRecorder", "conventions", "open_recording", "recorded_config", "recording_row",
+           "ReplayedResult", "ResultRow", "RowValue", "StationRecorder", "conventions", "open_recording", "recorded_config", "recording_row",
            "replay"]

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any, Final, Union
 
 import h5py
 import numpy as np
@@ -36,6 +36,11 @@ _FRAME_COLUMNS: Final = ("frame_id", "host_time_ns", "device_timestamp")
 _CHUNK_BYTES: Final = 1 << 20  # target size of a chunk of small per-row columns
 _KIND_RANK: Final = ("bool", "int", "float", "complex")  # a column accepts its kind and those before it
 _KIND_DTYPES: Final = (np.bool_, np.int64, np.float64, np.complex128)
+
+#: One value of a result row: a number, a bool, a string or a numeric array (e.g. the coefficients).
+RowValue = Union[bool, int, float, complex, str, NDArray[Any]]
+#: A result row: column name -> value. The first row (or the template) fixes the columns.
+ResultRow = Mapping[str, RowValue]
 
 
 # -- storage helpers ----------------------------------------------------------------------------
@@ -59,7 +64,7 @@ def _column_name_ok(key: object) -> bool:
     return isinstance(key, str) and bool(key) and "/" not in key
 
 
-def _columns_of(record: Mapping[str, Any]) -> tuple[_Column, ...]:
+def _columns_of(record: ResultRow) -> tuple[_Column, ...]:
     """Result columns named, typed and shaped after ``record``."""
     if not record:
         raise ValueError("result record: expected at least one column, got an empty record")
@@ -153,7 +158,7 @@ class _ResultColumns:
                 lengths.append(len(node))
         return cls(group, tuple(columns), min(lengths))
 
-    def append(self, record: Mapping[str, Any], row: int) -> None:
+    def append(self, record: ResultRow, row: int) -> None:
         """Validate the whole ``record`` against the columns, then write it as row ``row``."""
         known = {c.key for c in self._columns}
         for key in [*(k for k in record if k not in known), *(k for k in known if k not in record)]:

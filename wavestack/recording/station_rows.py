@@ -13,6 +13,7 @@ import numpy as np
 
 from wavestack import __version__
 from wavestack.config import StationConfig
+from wavestack.recording.format import RowValue
 from wavestack.recording.writer import RecordingWriter
 from wavestack.station import CycleRecord, Counters, StationResult
 
@@ -20,7 +21,7 @@ from wavestack.station import CycleRecord, Counters, StationResult
 FRAME_METADATA = ("pzt_commanded_v", "pzt_readback_v", "phase_step_rad")
 
 
-def recording_row(result: StationResult, modes: int, frames_per_set: int) -> dict[str, Any]:
+def recording_row(result: StationResult, modes: int, frames_per_set: int) -> dict[str, RowValue]:
     """The fixed-shape row of one result."""
     coefficients = np.full(modes, np.nan)
     coefficients[: len(result.coefficients)] = result.coefficients

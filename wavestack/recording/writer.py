@@ -47,6 +47,7 @@ from wavestack.recording.format import (
     _column_name_ok,
     _columns_of,
     _growable,
+    ResultRow,
     _ResultColumns,
 )
 
@@ -103,7 +104,7 @@ class RecordingWriter:
                  software_version: str, frame_shape: tuple[int, int], frame_dtype: DTypeLike,
                  frames_per_set: int, chunk_sets: int = 8, compress: bool = False, overwrite: bool = False,
                  metadata_keys: Sequence[str] | None = None,
-                 result_template: Mapping[str, Any] | None = None) -> None:
+                 result_template: ResultRow | None = None) -> None:
         self.path = Path(path)
         shape = tuple(int(n) for n in frame_shape)
         if len(shape) != 2 or min(shape) < 1:
@@ -286,7 +287,7 @@ class RecordingWriter:
         self._n_apertures += 1
         self._last_aperture_from = int(set_index)
 
-    def append_result(self, record: Mapping[str, Any]) -> None:
+    def append_result(self, record: ResultRow) -> None:
         """Append one result row.
 
         Parameters

@@ -11,7 +11,9 @@ shows into an :class:`ApertureEvent`, the table says what happens.
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Final
 
 if TYPE_CHECKING:
@@ -46,7 +48,7 @@ class ApertureAction(enum.Enum):
 
 
 #: (phase, event) -> (next phase, action). Pairs absent here cannot happen (see :data:`IMPOSSIBLE`).
-TRANSITIONS: Final[dict[tuple[AperturePhase, ApertureEvent], tuple[AperturePhase, ApertureAction]]] = {
+TRANSITIONS: Final[Mapping[tuple[AperturePhase, ApertureEvent], tuple[AperturePhase, ApertureAction]]] = MappingProxyType({
     (AperturePhase.NONE, ApertureEvent.NEW): (AperturePhase.HELD, ApertureAction.ADOPT),
     (AperturePhase.NONE, ApertureEvent.FAILED): (AperturePhase.NONE, ApertureAction.FORGET),
     (AperturePhase.HELD, ApertureEvent.QUIET): (AperturePhase.HELD, ApertureAction.KEEP),
@@ -58,7 +60,7 @@ TRANSITIONS: Final[dict[tuple[AperturePhase, ApertureEvent], tuple[AperturePhase
     (AperturePhase.PENDING, ApertureEvent.NEW): (AperturePhase.PENDING, ApertureAction.CONFIRMING),
     (AperturePhase.PENDING, ApertureEvent.AS_PENDING): (AperturePhase.HELD, ApertureAction.ADOPT),
     (AperturePhase.PENDING, ApertureEvent.FAILED): (AperturePhase.NONE, ApertureAction.FORGET),
-}
+})
 
 #: Pairs that cannot occur: no watch without an aperture, nothing to confirm without a pending one.
 IMPOSSIBLE: Final = frozenset({

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +26,7 @@ from wavestack.station.results import (
     StationResult,
     TruthErrors,
 )
+from wavestack.station.shack_hartmann import LensletSlopes
 
 
 class ProcessorOutcome(Protocol):
@@ -97,9 +98,17 @@ def make_result(index: int, frames: tuple[Frame, ...], outcome: ProcessorOutcome
         truth_error_rms=truth.error_rms if truth is not None else None)
 
 
-def with_output(result: StationResult, output: OutputRecord | None) -> StationResult:
-    """The result with what the output stage sent for it."""
-    return result if output is None else replace(result, output=output)
+def with_output(result: StationResult, output: OutputRecord | None, *, now_ns: int | None = None) -> StationResult:
+    """The result with what the output stage sent for it.
+
+    ``now_ns`` (``time.time_ns`` after the send): the latency then runs to the end of the PLC
+    exchange, as a result's latency always has (the result is complete once it is sent).
+    """
+    if output is None:
+        return result
+    if now_ns is None:
+        return replace(result, output=output)
+    return replace(result, output=output, latency_ms=(now_ns - result.exposure_time_ns) * 1e-6)
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,15 +124,14 @@ class CycleRecord:
     new_aperture_mask : ndarray of bool or None
         The full-resolution aperture when this set started a new one (interferometer), for the
         recording.
-    measurement : object or None
-        The processor's measurement beyond the coefficients, a frozen value (Shack-Hartmann: the
-        :class:`~wavestack.station.shack_hartmann.LensletSlopes`); None otherwise.
+    lenslets : LensletSlopes or None
+        Shack-Hartmann: the slopes per lenslet and the lenslets used (a frozen value).
     """
 
     result: StationResult
     frames: tuple[Frame, ...] = ()
     new_aperture_mask: NDArray[np.bool_] | None = None
-    measurement: Any = None
+    lenslets: LensletSlopes | None = None
 
 
 #: A result sink: the live view, the JSON lines, the recording.

@@ -176,7 +176,7 @@ class Station:
         result = make_result(index, frames, outcome, ordering=self._config.processing.ordering,
                              counters=self._counters(index + 1), now_ns=time.time_ns(), truth=errors)
         sent = self._output.send(result) if self._output is not None else None
-        return CycleRecord(with_output(result, sent), frames, outcome.new_aperture_mask,
+        return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
                            outcome.lenslets if isinstance(outcome, SlopeOutcome) else None)
 
     def _recover(self, stop: threading.Event, wait_s: float) -> None:
