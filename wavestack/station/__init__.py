@@ -1,1 +1,59 @@
-"""The station: streaming devices -> live refits -> results, recording and outputs (filled by the station issue)."""
+"""The live station: sources, devices, the two processors, the one-way result loop, outputs, live view.
+
+A cycle runs one way, one value per arrow: frames -> a processor's frozen outcome
+(:class:`InterferometerOutcome` or :class:`SlopeOutcome`) -> :func:`make_result` (pure) -> the
+output stage (safety stage, PLC), which returns an :class:`OutputRecord` -> one
+:class:`CycleRecord` for every sink.
+"""
+
+from __future__ import annotations
+
+from wavestack.station.aperture_confirmation import (
+    ApertureAction,
+    ApertureEvent,
+    AperturePhase,
+    ApertureState,
+    Detection,
+    confirm,
+)
+from wavestack.station.cycle import CycleRecord, ProcessorOutcome, ResultSink, make_result, with_output
+from wavestack.station.devices import StationDevices, configure_camera, open_station_devices, phase_steps_rad
+from wavestack.station.fitter_cache import FALLBACK_METHOD, FitterCache, FitterChoice
+from wavestack.station.interferometer import CARRIER_REFRESH_SETS, InterferometerOutcome, SetProcessor
+from wavestack.station.live_view import LiveSnapshot, LiveStats, render_live_view
+from wavestack.station.outputs import PlcOutput
+from wavestack.station.results import (
+    ApertureRecord,
+    Counters,
+    FitDiagnostics,
+    FitterDiagnostics,
+    Heartbeat,
+    OutputRecord,
+    ReconstructorDiagnostics,
+    SentCommand,
+    StationResult,
+    TruthErrors,
+    json_ready,
+)
+from wavestack.station.shack_hartmann import (
+    MODAL,
+    LensletSlopes,
+    SlopeOutcome,
+    SlopeProcessor,
+    coefficient_errors,
+    pupil_lenslets,
+)
+from wavestack.station.sources import CarrierSource, PhaseStepSource, SourceCounters
+from wavestack.station.station import Station, StationSummary, build_processor
+from wavestack.station.truth import TruthCheck
+
+__all__ = [
+    "ApertureAction", "ApertureEvent", "AperturePhase", "ApertureRecord", "ApertureState", "CARRIER_REFRESH_SETS",
+    "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
+    "FitterChoice", "FitterDiagnostics", "Heartbeat", "InterferometerOutcome", "LensletSlopes", "LiveSnapshot",
+    "LiveStats", "MODAL", "OutputRecord", "PhaseStepSource", "PlcOutput", "ProcessorOutcome",
+    "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetProcessor", "SlopeOutcome", "SlopeProcessor",
+    "SourceCounters", "Station", "StationDevices", "StationResult", "StationSummary", "TruthCheck", "TruthErrors",
+    "build_processor", "coefficient_errors", "configure_camera", "confirm", "json_ready", "make_result",
+    "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view", "with_output",
+]

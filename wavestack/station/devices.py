@@ -20,18 +20,17 @@ from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
 from wavestack.drivers.plc import PolishingLink
 from wavestack.drivers.u3v import U3VCamera
-from wavestack.pzt_settings import build_calibration, build_piezo, build_simulated_device
+from wavestack.config import BIT_DEPTH, StationConfig, build_calibration, build_piezo, build_simulated_device
 from wavestack.simulators import attach_simulated_device, register_serial_simulators
 from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
 from wavestack.simulators.optic import TestOptic
 from wavestack.simulators.plc import PlcSimulator
 from wavestack.simulators.spots import SpotRenderer, SpotTruth
 from wavestack.simulators.u3v import U3VSimSettings
-from wavestack.station.settings import StationConfig
+from wavestack.station.sim_truth import InterferometerTruthCheck, ShackHartmannTruthCheck
+from wavestack.station.truth import TruthCheck
 
 logger = logging.getLogger(__name__)
-
-_BIT_DEPTH = {"Mono8": 8, "Mono12": 12, "Mono16": 16}
 
 
 @dataclass(eq=False)
@@ -47,6 +46,8 @@ class StationDevices:
     bench : SimulatedInterferometer or SimulatedShackHartmann or None
         The simulated bench (ground truth), when the camera is simulated.
     plc_simulator : PlcSimulator or None
+    truth_check : TruthCheck or None
+        Compares results with the simulator's truth, when the camera is simulated.
     """
 
     camera: U3VCamera
@@ -55,6 +56,7 @@ class StationDevices:
     link: PolishingLink | None = None
     bench: SimulatedInterferometer | SimulatedShackHartmann | None = None
     plc_simulator: PlcSimulator | None = None
+    truth_check: TruthCheck | None = None
 
     def truth(self, frame: Frame) -> FrameTruth | SpotTruth | None:
         """The simulator's ground truth of a frame (None on real hardware or when evicted).
@@ -84,7 +86,7 @@ def _simulated_bench(config: StationConfig, stack: ExitStack) -> tuple[Simulated
     sim = config.camera_simulator
     optic_settings = config.optic
     assert optic_settings is not None  # parse_station_config requires [optic] for sim://u3v
-    if optic_settings.bit_depth != _BIT_DEPTH[sim.pixel_format]:
+    if optic_settings.bit_depth != BIT_DEPTH[sim.pixel_format]:
         raise ValueError(f"{config.source}: [optic] bit_depth {optic_settings.bit_depth} does not match "
                          f"[camera.simulator] pixel_format {sim.pixel_format!r}")
     piezo_device = None
@@ -106,6 +108,16 @@ def _simulated_shack_hartmann(config: StationConfig) -> SimulatedShackHartmann:
     return SimulatedShackHartmann(
         spots, U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
                               frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml))
+
+
+def _truth_check(bench: SimulatedInterferometer | SimulatedShackHartmann | None,
+                 config: StationConfig) -> TruthCheck | None:
+    """The comparison with the simulator's truth (simulated cameras only)."""
+    if isinstance(bench, SimulatedShackHartmann):
+        return ShackHartmannTruthCheck(bench)
+    if isinstance(bench, SimulatedInterferometer):
+        return InterferometerTruthCheck(bench, config.processing.fit_decimation)
+    return None
 
 
 def _piezo_url(url: str, name: str) -> str:
@@ -140,7 +152,7 @@ def open_station_devices(config: StationConfig, stack: ExitStack) -> StationDevi
                                 ring_capacity=config.camera.ring_capacity)
     stack.callback(camera.close)
     configure_camera(camera, config)
-    devices = StationDevices(camera=camera, bench=bench)
+    devices = StationDevices(camera=camera, bench=bench, truth_check=_truth_check(bench, config))
 
     if config.pzt is not None and config.phase_stepping:
         settings = config.pzt

@@ -16,22 +16,12 @@ import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
+from wavestack.config import FitSettings
 from wavestack.pipeline import Aperture, Fitter, build_fitter
 
 logger = logging.getLogger(__name__)
 
 FALLBACK_METHOD = "qr"
-
-
-@dataclass(frozen=True)
-class FitSettings:
-    """What a fitter is built with (see :func:`wavestack.pipeline.build_fitter`)."""
-
-    method: str = "csf-qcm"
-    modes: int = 36
-    ordering: str = "noll"
-    remove: str | None = "ptt"
-    mesh_vertices: int = 15000
 
 
 @dataclass(frozen=True, eq=False)

@@ -84,7 +84,8 @@ class LiveStats:
             aperture, fitter = "-", "-"
         else:
             a = last.aperture
-            aperture = f"#{a.get('id', '-')} {a.get('topology', '-')}"  # topology names the pixel count
+            # topology names the pixel count
+            aperture = "#- -" if a is None else f"#{a.id} {a.topology}"
             fitter = (last.fitter or "-") + (" (fallback, building)" if last.fitter_fallback else "")
         return LiveSnapshot(
             results=self._count, valid=self._valid, results_per_s=rate,

@@ -11,6 +11,8 @@ the result, and the next cycle tries again.
 from __future__ import annotations
 
 import logging
+import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -19,7 +21,8 @@ from numpy.typing import NDArray
 from wavestack.drivers.errors import DeviceError
 from wavestack.drivers.plc import PolishingLink
 from wavestack.drivers.safety import SafetyLimits, SafetyStage
-from wavestack.station.settings import OutputSettings
+from wavestack.config import OutputSettings
+from wavestack.station.results import Heartbeat, OutputRecord, SentCommand, StationResult
 
 logger = logging.getLogger(__name__)
 
@@ -67,7 +70,7 @@ class PlcOutput:
         removal[: self._settings.first_term - 1] = 0.0  # piston and tilts are alignment, not polishing
         return removal
 
-    def heartbeat(self) -> dict[str, Any]:
+    def heartbeat(self) -> Heartbeat:
         """One heartbeat; returns the PLC status (or the error) for the result record.
 
         The PLC's watchdog starts counting at the connection's first heartbeat, and the station's
@@ -84,36 +87,52 @@ class PlcOutput:
             status = self._link.heartbeat(self._timeout_s)
         except DeviceError as error:
             logger.warning("PLC heartbeat failed: %s", error)
-            return {"heartbeat": False, "error": str(error)}
-        return {"heartbeat": True, "watchdog_tripped": status.watchdog_tripped, "ready": status.ready,
-                "estop": status.estop}
+            return Heartbeat(False, error=str(error))
+        return Heartbeat(True, watchdog_tripped=status.watchdog_tripped, ready=status.ready, estop=status.estop)
+
+    def send(self, result: StationResult) -> OutputRecord:
+        """The cycle's heartbeat, then the result through the safety stage to the PLC.
+
+        Returns
+        -------
+        OutputRecord
+            The heartbeat's status and what the safety stage made of the result.
+        """
+        heartbeat = self.heartbeat()
+        coefficients = np.asarray(result.coefficients, dtype=np.float64) if result.coefficients else None
+        command = self.publish(coefficients, valid=result.valid, measured_at_s=result.exposure_time_ns * 1e-9,
+                               now_s=time.time_ns() * 1e-9, reason=result.reason)
+        return OutputRecord(heartbeat, command)
+
+    def device_lost(self, reason: str, now_ns: int) -> OutputRecord:
+        """No measurement this cycle (a lost device): the safety stage holds; no heartbeat."""
+        now_s = now_ns * 1e-9
+        return OutputRecord(None, self.publish(None, valid=False, measured_at_s=now_s, now_s=now_s, reason=reason))
 
     def publish(self, coefficients_waves: NDArray[np.float64] | None, *, valid: bool, measured_at_s: float,
-                now_s: float, reason: str | None) -> dict[str, Any]:
+                now_s: float, reason: str | None) -> SentCommand:
         """Pass one result through the safety stage and send what it forwards.
 
         Returns
         -------
-        dict
-            ``sent`` (bool), ``command_id`` (or None), ``status`` (the safety flags, e.g.
+        SentCommand
+            ``sent``, ``command_id`` (or None), ``status`` (the safety flags, e.g.
             ``"CLIPPED|RATE_LIMITED"`` or ``"HELD|STALE"``), ``reason`` and ``values_nm``.
         """
         safe = self.stage.update(self.requested_removal_nm(coefficients_waves), valid=valid,
                                  measured_at_s=measured_at_s, now_s=now_s, reason=reason)
-        record: dict[str, Any] = {"sent": False, "command_id": None, "status": _flags(safe.status),
-                                  "reason": safe.reason, "values_nm": [float(v) for v in safe.values]}
+        held = SentCommand(sent=False, command_id=None, status=_flags(safe.status), reason=safe.reason,
+                           values_nm=tuple(float(v) for v in safe.values))
         if not safe.forwarded or not self._settings.enabled:
-            return record
+            return held
         command_id = self._command_id % _MAX_COMMAND_ID + 1
         try:
             self._link.send_removal(command_id, safe.values, self._settings.passes, self._timeout_s)
         except DeviceError as error:
             logger.warning("PLC command %d not sent: %s", command_id, error)
-            record["reason"] = f"PLC: {error}"
-            return record
+            return replace(held, reason=f"PLC: {error}")
         self._command_id = command_id
-        record.update(sent=True, command_id=command_id)
-        return record
+        return replace(held, sent=True, command_id=command_id)
 
 
 def _flags(status: Any) -> str:

@@ -1,10 +1,15 @@
-"""The station's result record: everything one refit produced, as a plain value and as JSON."""
+"""The station's result record: everything one refit produced, as a plain value and as JSON.
+
+The small records on a result (:class:`ApertureRecord`, the fitter's diagnostics, the
+:class:`OutputRecord` of what went to the PLC) are frozen dataclasses; each has a ``to_json``
+that gives the keys the JSON lines and the recording have always carried.
+"""
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
-from typing import Any
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any, Union
 
 
 @dataclass(frozen=True)
@@ -19,6 +24,137 @@ class Counters:
     acquired: int
     processed: int
     dropped: int
+
+
+@dataclass(frozen=True)
+class ApertureRecord:
+    """The aperture a result was measured on.
+
+    Attributes
+    ----------
+    id : int or None
+        Counted per run from 0 (interferometer: per aperture; Shack-Hartmann: per lit-lenslet set).
+    changed : bool
+        This set started it.
+    topology : str
+        A one-line description (interferometer: the aperture's topology and pixel count).
+    valid_pixels : int
+    components : int or None
+        Interferometer: connected components of the aperture.
+    valid_lenslets : int or None
+        Shack-Hartmann: lit lenslets used.
+    """
+
+    id: int | None
+    changed: bool
+    topology: str
+    valid_pixels: int
+    components: int | None = None
+    valid_lenslets: int | None = None
+
+    def to_json(self) -> dict[str, object]:
+        """The record's keys as the JSON lines carry them (absent optional figures left out)."""
+        record: dict[str, object] = {"id": self.id, "changed": self.changed, "topology": self.topology}
+        if self.components is not None:
+            record["components"] = self.components
+        if self.valid_lenslets is not None:
+            record["valid_lenslets"] = self.valid_lenslets
+        record["valid_pixels"] = self.valid_pixels
+        return record
+
+
+@dataclass(frozen=True)
+class FitDiagnostics:
+    """A mapped or QR fitter's figures: Gram condition number, map fold-overs, largest Beltrami coefficient."""
+
+    gram_condition: float | None
+    flips: int | None
+    max_beltrami: float | None
+
+    def to_json(self) -> dict[str, object]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class ReconstructorDiagnostics:
+    """A Shack-Hartmann modal reconstructor's figures: condition number, lit and pupil lenslets."""
+
+    condition: float
+    lit_lenslets: int
+    pupil_lenslets: int
+
+    def to_json(self) -> dict[str, object]:
+        return asdict(self)
+
+
+FitterDiagnostics = Union[FitDiagnostics, ReconstructorDiagnostics]
+
+
+@dataclass(frozen=True)
+class Heartbeat:
+    """One PLC heartbeat: the PLC's status, or the error that stopped the exchange."""
+
+    ok: bool
+    watchdog_tripped: bool | None = None
+    ready: bool | None = None
+    estop: bool | None = None
+    error: str | None = None
+
+    def to_json(self) -> dict[str, object]:
+        if not self.ok:
+            return {"heartbeat": False, "error": self.error}
+        return {"heartbeat": True, "watchdog_tripped": self.watchdog_tripped, "ready": self.ready,
+                "estop": self.estop}
+
+
+@dataclass(frozen=True)
+class SentCommand:
+    """What the safety stage made of one result and whether it went to the PLC.
+
+    Attributes
+    ----------
+    sent : bool
+    command_id : int or None
+        The PLC command id, when sent.
+    status : str
+        The safety flags, e.g. ``"CLIPPED|RATE_LIMITED"`` or ``"HELD|STALE"`` (``"OK"`` for none).
+    reason : str or None
+    values_nm : tuple of float
+        The removal per PLC term after the safety stage, nm.
+    """
+
+    sent: bool
+    command_id: int | None
+    status: str
+    reason: str | None
+    values_nm: tuple[float, ...]
+
+    def to_json(self) -> dict[str, object]:
+        return {"sent": self.sent, "command_id": self.command_id, "status": self.status, "reason": self.reason,
+                "values_nm": list(self.values_nm)}
+
+
+@dataclass(frozen=True)
+class OutputRecord:
+    """What the output stage did for one result: the heartbeat (none after a lost device) and the command."""
+
+    heartbeat: Heartbeat | None
+    command: SentCommand
+
+    @property
+    def sent(self) -> bool:
+        return self.command.sent
+
+    def to_json(self) -> dict[str, object]:
+        return {**(self.heartbeat.to_json() if self.heartbeat is not None else {}), **self.command.to_json()}
+
+
+@dataclass(frozen=True)
+class TruthErrors:
+    """Simulated devices only: RMS of the true wavefront and of measured minus true, waves."""
+
+    truth_rms: float | None
+    error_rms: float | None
 
 
 @dataclass(frozen=True)
@@ -49,10 +185,10 @@ class StationResult:
         Method of the fitter that ran (``csf-qcm``, ``qr``, ...).
     fitter_fallback : bool
         True when a ``qr`` fitter stood in while the configured one was being built.
-    fitter_diagnostics : dict
+    fitter_diagnostics : FitDiagnostics or ReconstructorDiagnostics or None
         Condition number (``gram_condition``), map fold-overs (``flips``), largest Beltrami
-        coefficient (``max_beltrami``).
-    aperture : dict
+        coefficient (``max_beltrami``); or a reconstructor's condition and lenslet counts.
+    aperture : ApertureRecord or None
         ``id`` (counted per run), ``changed`` (this set started it), ``topology``,
         ``components``, ``valid_pixels``.
     unwrap_path : str or None
@@ -64,7 +200,7 @@ class StationResult:
         Simulated devices only: RMS of the simulator's true wavefront (piston, tilt removed as the
         fit removes them) and RMS of the measured minus the true wavefront, both over the fitted
         aperture in the fitted subspace, waves.
-    output : dict or None
+    output : OutputRecord or None
         What went to the PLC: ``sent`` (bool), ``status`` flags, ``command_id``.
     """
 
@@ -81,29 +217,39 @@ class StationResult:
     residual_rms: float
     fitter: str | None
     fitter_fallback: bool
-    fitter_diagnostics: dict[str, float | int | None]
-    aperture: dict[str, Any]
+    fitter_diagnostics: FitterDiagnostics | None
+    aperture: ApertureRecord | None
     unwrap_path: str | None
     counters: Counters
     timings_ms: dict[str, float] = field(default_factory=dict)
     truth_rms: float | None = None
     truth_error_rms: float | None = None
-    output: dict[str, Any] | None = None
+    output: OutputRecord | None = None
 
     @classmethod
-    def invalid(cls, index: int, reason: str, counters: Counters, *, ordering: str, exposure_time_ns: int = 0,
-                output: dict[str, Any] | None = None) -> StationResult:
+    def invalid(cls, index: int, reason: str, counters: Counters, *, ordering: str,
+                exposure_time_ns: int = 0) -> StationResult:
         """A result without a measurement (a lost device, a template row): no frames, no fit."""
         return cls(index=index, frame_ids=(), exposure_time_ns=exposure_time_ns, latency_ms=0.0, valid=False,
                    reason=reason, coefficients=(), ordering=ordering, normalisation="rms", units="waves",
-                   residual_rms=float("nan"), fitter=None, fitter_fallback=False, fitter_diagnostics={},
-                   aperture={}, unwrap_path=None, counters=counters, output=output)
+                   residual_rms=float("nan"), fitter=None, fitter_fallback=False, fitter_diagnostics=None,
+                   aperture=None, unwrap_path=None, counters=counters)
+
+    @property
+    def aperture_changed(self) -> bool:
+        """True when this set started a new aperture."""
+        return self.aperture is not None and self.aperture.changed
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict with ``"type": "result"`` first; NaN becomes null."""
-        values = asdict(self)
+        values: dict[str, Any] = {f.name: getattr(self, f.name) for f in fields(self)}
         values["frame_ids"] = list(self.frame_ids)
         values["coefficients"] = list(self.coefficients)
+        values["counters"] = asdict(self.counters)
+        values["timings_ms"] = dict(self.timings_ms)
+        values["fitter_diagnostics"] = {} if self.fitter_diagnostics is None else self.fitter_diagnostics.to_json()
+        values["aperture"] = {} if self.aperture is None else self.aperture.to_json()
+        values["output"] = None if self.output is None else self.output.to_json()
         return {"type": "result", **json_ready(values)}
 
 

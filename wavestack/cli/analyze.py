@@ -1,0 +1,211 @@
+"""``wavestack analyze``: interferograms or instrument files to Zernike terms.
+
+Several image files are a phase-shifted set in stepping order; one image is analysed by the
+carrier method; a ``.dat`` (Zygo MetroPro) or ``.datx`` file is a measured map.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wavestack.cli.arguments import positive_int
+from wavestack.cli.command import Command
+from wavestack.pipeline import Aperture, InputError, build_fitter
+from wavestack.pipeline import DetectionSettings, detect_aperture
+from wavestack.pipeline import ConicTest, implied_conic_constant, null_wavefront_waves
+from wavestack.pipeline import read_frame, read_frame_set
+from wavestack.pipeline import MeasuredWavefront, wavefront_from_carrier, wavefront_from_phase_shifts
+from wavestack.pipeline import read_datx, read_metropro_dat
+from wavestack.pipeline import mode_name
+
+_MAP_SUFFIXES = {".dat", ".datx"}
+
+
+def _steps_argument(text: str) -> np.ndarray:
+    try:
+        values = np.array([float(v) for v in text.split(",")])
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected phase steps in degrees, e.g. 0,60,120, got {text!r}") from None
+    return np.deg2rad(values)
+
+
+def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
+    """Declare the options of ``wavestack analyze``."""
+    parser.add_argument("files", nargs="+", metavar="FILE", help="images (a phase-shifted set or one carrier frame), or one .dat/.datx")
+    parser.add_argument("--method", choices=("psi", "aia", "pca", "carrier"),
+                        help="psi: least squares with known steps; aia/pca: steps estimated from the data "
+                             "(default: psi for several frames, carrier for one)")
+    parser.add_argument("--steps", type=_steps_argument, help="phase steps in degrees (default: 360/N apart)")
+    parser.add_argument("--direction", choices=("ccw", "cw"), default="ccw", help="phase-step direction (ccw)")
+    parser.add_argument("--carrier-sign", type=int, choices=(1, -1), default=1,
+                        help="sign of a single carrier frame's phase (+1 or -1, for the tilt direction)")
+    parser.add_argument("--wavelength-nm", type=float, help="test wavelength (required for images; files carry it)")
+    parser.add_argument("--modes", type=positive_int, default=36)
+    parser.add_argument("--ordering", choices=("noll", "ansi", "fringe"), default="noll")
+    parser.add_argument("--fit-method", choices=("circle", "qr", "csf-qcm"), default="circle")
+    parser.add_argument("--remove", choices=("ptt", "pttp"), help="remove piston/tilt(/power) before reporting")
+    parser.add_argument("--null-conic", type=float, metavar="K",
+                        help="subtract the wavefront a conic of constant K shows at its centre of curvature "
+                             "(needs --roc-mm and --diameter-mm)")
+    parser.add_argument("--roc-mm", type=float, help="mirror radius of curvature, mm (for the null and the implied conic)")
+    parser.add_argument("--diameter-mm", type=float, help="diameter of the analysed aperture, mm")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--save-map", metavar="OUT.npy", help="save the analysed wavefront (waves, NaN outside)")
+
+
+def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float]:
+    paths = [Path(p) for p in args.files]
+    suffixes = {p.suffix.lower() for p in paths}
+    if suffixes & _MAP_SUFFIXES:
+        if len(paths) != 1:
+            raise InputError(f"{paths[0]}: a measured map (.dat/.datx) is analysed on its own; got {len(paths)} files")
+        return _measured_map(paths[0], args)
+    if args.wavelength_nm is None:
+        raise InputError(f"{paths[0]}: --wavelength-nm is required for interferogram images")
+    if len(paths) == 1:
+        if args.method not in (None, "carrier"):
+            raise InputError(f"{paths[0]}: one frame can only be analysed by the carrier method; got --method {args.method}")
+        return wavefront_from_carrier(read_frame(paths[0]), sign=args.carrier_sign), args.wavelength_nm
+    if args.method == "carrier":
+        raise InputError(f"{paths[0]}: the carrier method takes one frame; got {len(paths)}")
+    frames = read_frame_set(paths)
+    if args.steps is not None and len(args.steps) != len(paths):
+        raise InputError(f"{paths[0]}: --steps gives {len(args.steps)} steps for {len(paths)} frames")
+    method = {"psi": "lsq", None: "lsq", "aia": "aia", "pca": "pca"}[args.method]
+    measured = wavefront_from_phase_shifts(frames, method=method, steps_rad=args.steps, direction=args.direction)
+    return measured, args.wavelength_nm
+
+
+def _measured_map(path: Path, args: argparse.Namespace) -> tuple[MeasuredWavefront, float]:
+    tick = time.perf_counter()
+    if path.suffix.lower() == ".dat":
+        data = read_metropro_dat(path)
+        map_nm, wavelength = data.phase_nm, data.header.wavelength_nm
+    else:
+        data = read_datx(path)
+        map_nm, wavelength = data.surface_nm, data.wavelength_nm
+    wavelength = args.wavelength_nm or wavelength
+    valid = np.isfinite(map_nm)
+    # dropouts inside the measured area are filled for the aperture and omitted in the fit
+    aperture = detect_aperture(valid.astype(np.float64), DetectionSettings(threshold=0.5)).aperture
+    return MeasuredWavefront(
+        waves=map_nm / wavelength, aperture=aperture, method="file",
+        timings={"read": time.perf_counter() - tick},
+    ), wavelength
+
+
+def _null_test(args: argparse.Namespace, wavelength_nm: float) -> ConicTest | None:
+    if args.roc_mm is None and args.diameter_mm is None and args.null_conic is None:
+        return None
+    if args.roc_mm is None or args.diameter_mm is None:
+        raise InputError("--null-conic and the implied conic need both --roc-mm and --diameter-mm")
+    return ConicTest(args.roc_mm, args.diameter_mm, wavelength_nm)
+
+
+def _apply_null_test(args: argparse.Namespace, test: ConicTest, aperture: Aperture, waves: np.ndarray,
+                     report: dict[str, Any]) -> np.ndarray:
+    """Record the implied conic and, with ``--null-conic``, subtract that conic's null wavefront (waves)."""
+    # the implied conic reads Z11 of the raw map over the aperture's circle (Noll, unit RMS)
+    circle = build_fitter(aperture, modes=max(args.modes, 11), dtype=np.float64)
+    pupil = circle.basis.pupil
+    raw_spherical = circle.fit(waves, nan_policy="omit").coefficients[10]
+    report["implied_conic"] = implied_conic_constant(raw_spherical, test)
+    report["measured_spherical_waves"] = raw_spherical
+    if args.null_conic is None:
+        return waves
+    rows, cols = np.indices(waves.shape)
+    rho = np.hypot(cols - pupil.cx, rows - pupil.cy) / pupil.radius
+    report["null_conic"] = args.null_conic
+    return waves - np.where(aperture.mask, null_wavefront_waves(np.minimum(rho, 1.0), test, args.null_conic), np.nan)
+
+
+def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Execute ``wavestack analyze``; returns the exit status."""
+    try:
+        measured, wavelength_nm = _measure(args)
+    except InputError:
+        raise
+    except ValueError as error:  # the data, not the file, is unusable: say which input
+        files = args.files[0] if len(args.files) == 1 else f"{args.files[0]} (and {len(args.files) - 1} more)"
+        raise InputError(f"{files}: {error}") from None
+    aperture: Aperture = measured.aperture
+    waves = np.where(aperture.mask, measured.waves, np.nan)
+    test = _null_test(args, wavelength_nm)
+    timings = dict(measured.timings)
+    report: dict[str, Any] = {"files": list(args.files), "method": measured.method}
+    if measured.steps_rad is not None:
+        report["steps_deg"] = np.rad2deg(measured.steps_rad).tolist()
+        report["steps_estimated"] = measured.method in ("aia", "pca")
+    if measured.carrier is not None:
+        report["carrier_cycles_per_px"] = list(measured.carrier)
+
+    tick = time.perf_counter()
+    if test is not None:
+        waves = _apply_null_test(args, test, aperture, waves, report)
+    fitter = build_fitter(
+        aperture, method=args.fit_method, modes=args.modes, ordering=args.ordering,
+        dtype=np.float64, remove=args.remove, fallback="qr",
+    )
+    result = fitter.fit(waves, nan_policy="omit", residual=True)
+    timings["fit"] = time.perf_counter() - tick
+    analysed = result.residual_map + fitter.surface(result.coefficients)  # the map less removed terms
+    if args.save_map:
+        np.save(args.save_map, analysed)
+    rms, pv = float(np.nanstd(analysed)), float(np.nanmax(analysed) - np.nanmin(analysed))
+    cx, cy, radius = aperture.enclosing_circle()
+    rows, cols = np.nonzero(aperture.mask)
+    report.update({
+        "wavelength_nm": wavelength_nm,
+        "aperture": {
+            "centre": [cx, cy], "radius": radius,
+            "bbox": [int(cols.min()), int(rows.min()), int(cols.max()), int(rows.max())],
+            "topology": aperture.topology.value, "valid_pixels": int(aperture.valid_count),
+        },
+        "fit_method": fitter.basis.method, "modes": len(fitter.basis.modes), "ordering": fitter.basis.ordering,
+        "first_index": fitter.basis.first_index, "normalisation": fitter.basis.normalisation,
+        "mode_indices": [list(m) for m in fitter.basis.modes],
+        "coefficients_waves": result.coefficients.tolist(),
+        "residual_rms_waves": result.residual_rms,
+        "rms_waves": rms, "pv_waves": pv, "rms_nm": rms * wavelength_nm, "pv_nm": pv * wavelength_nm,
+        "diagnostics": fitter.diagnostics.as_dict(),
+        "timings": timings,
+    })
+    if result.removed is not None:
+        report["removed"] = result.removed.as_dict()
+    print(json.dumps(report) if args.json else _format(report))
+    return 0
+
+
+def _format(report: dict[str, Any]) -> str:
+    ap = report["aperture"]
+    lines = [
+        f"files       {', '.join(report['files'])}",
+        f"phase       {report['method']}"
+        + (f", steps {', '.join(f'{s:.1f}' for s in report['steps_deg'])} deg"
+           + (" (estimated)" if report.get("steps_estimated") else "") if "steps_deg" in report else ""),
+        f"aperture    {ap['topology']}, {ap['valid_pixels']} px, centre (col {ap['centre'][0]:.1f}, "
+        f"row {ap['centre'][1]:.1f}), radius {ap['radius']:.1f} px",
+        f"wavefront   RMS {report['rms_waves']:.4f} waves ({report['rms_nm']:.1f} nm), "
+        f"PV {report['pv_waves']:.4f} waves ({report['pv_nm']:.1f} nm) at {report['wavelength_nm']} nm",
+    ]
+    if "implied_conic" in report:
+        lines.append(f"conic       measured Z11 {report['measured_spherical_waves']:.4f} waves implies K = {report['implied_conic']:.3f}"
+                     + (f"; null for K = {report['null_conic']} subtracted" if "null_conic" in report else ""))
+    lines += ["", f"{'j':>4}  {'(n, m)':>9}  {'name':<24} {'waves':>10}"]
+    for offset, ((n, m), value) in enumerate(zip(report["mode_indices"], report["coefficients_waves"])):
+        lines.append(f"{report['first_index'] + offset:>4}  {f'({n}, {m})':>9}  {mode_name(n, m):<24} {value:>10.4f}")
+    return "\n".join(lines)
+
+
+COMMAND = Command(
+    "analyze",
+    help="interferograms (a phase-shifted set or one carrier frame) or a .dat/.datx file to Zernike terms",
+    description="Analyse interferograms or instrument files: phase, aperture, unwrap, fit.",
+    add_arguments=add_analyze_arguments, handler=run_analyze,
+)

@@ -1,0 +1,84 @@
+"""``wavestack bench``: benchmarks that print figures (never timed tests)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from wavestack.bench import (
+    PAPER_APERTURES,
+    carrier_config,
+    figures_json,
+    format_figures,
+    format_markdown,
+    machine_state,
+    measure_path,
+    rows_as_json,
+    run_paper_benchmark,
+    targets,
+)
+from wavestack.cli.arguments import positive_int
+from wavestack.cli.command import Command
+from wavestack.config import load_station_config
+
+def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
+    """Declare the options of ``wavestack bench``."""
+    parser.add_argument("target", choices=("paper", "station"),
+                        help="paper: the seed paper's Tables 1-3; station: the simulated station's speed")
+    parser.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+    parser.add_argument(
+        "--aperture", action="append", choices=tuple(PAPER_APERTURES),
+        help="paper only: only this aperture (repeatable; default: all)",
+    )
+    station = parser.add_argument_group("station options")
+    station.add_argument("--config", type=Path, help="station TOML (default: the simulated station)")
+    station.add_argument("--results", type=positive_int, default=60, metavar="N",
+                         help="results measured per path after the warm-up (default 60)")
+
+
+def run_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Execute ``wavestack bench``; returns the exit status."""
+    if args.target == "station":
+        if args.aperture:
+            parser.error("--aperture belongs to 'bench paper'")
+        return run_station_bench(args)
+    if args.config is not None:
+        parser.error("--config belongs to 'bench station'")
+    rows = run_paper_benchmark(tuple(args.aperture) if args.aperture else None)
+    if args.json:
+        print(json.dumps({"benchmark": "paper", "rows": rows_as_json(rows)}))
+    else:
+        print(format_markdown(rows))
+    return 0
+
+
+def run_station_bench(args: argparse.Namespace) -> int:
+    """Measure both paths and print the figures (text, or JSON with ``args.json``); returns 0.
+
+    Raises
+    ------
+    ValueError
+        A configuration without a simulated camera (the benchmark needs the simulated bench).
+    """
+    config = load_station_config(args.config)
+    if not config.camera.simulated or config.optic is None:
+        raise ValueError(f"{config.source}: bench station needs the simulated camera ([camera] url = 'sim://u3v')")
+    paths = [("carrier", carrier_config(config))] + ([("psi", config)] if config.processing.method == "psi" else [])
+    machine = machine_state()
+    figures = [measure_path(name, path_config, args.results) for name, path_config in paths]
+    if getattr(args, "json", False):
+        print(json.dumps({"benchmark": "station", "config": config.source, "machine": machine.to_json(),
+                          "targets": targets(), "paths": figures_json(figures)}))
+    else:
+        print("\n".join(format_figures(config.source, figures, machine)))
+    return 0
+
+
+COMMAND = Command(
+    "bench",
+    help="run a benchmark and print its figures",
+    description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables, 'station' "
+                "measures the simulated station (results per second, latency, stages, aperture change).",
+    add_arguments=add_bench_arguments, handler=run_bench,
+)

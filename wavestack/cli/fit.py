@@ -1,0 +1,208 @@
+"""``wavestack fit``: fit Zernike terms to one wavefront map and report them."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from typing import Any
+
+import numpy as np
+
+from wavestack.cli.arguments import positive_int
+from wavestack.cli.command import Command
+from wavestack.cli.example import synthetic_example
+from wavestack.pipeline import (
+    Aperture,
+    FitResult,
+    Fitter,
+    InputError,
+    Pupil,
+    available_methods,
+    build_fitter,
+    load_map,
+    load_mask,
+)
+from wavestack.pipeline import mode_name
+
+_DTYPES = {"float64": np.float64, "float32": np.float32}
+# Above this coefficient noise amplification the human report warns that single coefficients
+# mean little (100: 0.01 waves of pixel noise become ~1 wave of coefficient scatter at N/M ~ 1e4).
+_NOISE_GAIN_WARNING = 100.0
+
+
+def _pupil_argument(text: str) -> Pupil:
+    parts = text.split(",")
+    try:
+        cx, cy, r = (float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected CX,CY,R in pixels (three numbers), got {text!r}"
+        ) from None
+    return Pupil(cx, cy, r)
+
+
+def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
+    """Declare the options of ``wavestack fit``."""
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("wavefront", nargs="?", help="2-D .npy map, NaN outside the aperture")
+    source.add_argument(
+        "--example", action="store_true", help="fit the bundled synthetic example instead"
+    )
+    parser.add_argument("--mask", help="mask (.npy or image, non-zero = valid); default: finite pixels")
+    parser.add_argument("--method", choices=available_methods(), default="circle")
+    parser.add_argument("--modes", type=positive_int, default=36, help="number of modes (36)")
+    parser.add_argument("--ordering", choices=("noll", "ansi", "fringe"), default="noll")
+    parser.add_argument(
+        "--pupil", type=_pupil_argument, help="unit disk CX,CY,R in pixels (CX column, CY row)"
+    )
+    parser.add_argument("--remove", choices=("ptt", "pttp"), help="remove piston/tilt(/power) first")
+    parser.add_argument(
+        "--laplacian", choices=("cotangent", "graph"), default="cotangent",
+        help="interior weights of the csf-qcm map (graph: the paper's)",
+    )
+    parser.add_argument(
+        "--mesh-vertices", type=positive_int, default=15000,
+        help="approximate mesh size of the mapped methods (15000)",
+    )
+    parser.add_argument(
+        "--no-angular-balance", action="store_true",
+        help="csf-qcm: the paper's map alone, without wavestack's angular area balancing",
+    )
+    parser.add_argument("--dtype", choices=tuple(_DTYPES), default="float64")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--save-fit", metavar="OUT.npy", help="save the fitted map (NaN outside)")
+
+
+def _load_inputs(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str, np.ndarray | None]:
+    if args.example:
+        example = synthetic_example()
+        return example.wavefront, example.mask, example.description, example.truth
+    wavefront = load_map(args.wavefront)
+    if args.mask:
+        mask = load_mask(args.mask, shape=wavefront.shape)
+        if not mask.any():
+            raise InputError(f"{args.mask}: the mask has no valid pixel")
+    else:
+        mask = np.isfinite(wavefront)
+    return wavefront, mask, args.wavefront, None
+
+
+def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Execute ``wavestack fit``; returns the exit status."""
+    if args.example and args.mask:
+        parser.error("--mask cannot be combined with --example")
+    wavefront, mask, source, truth = _load_inputs(args)
+    fitter = build_fitter(
+        Aperture.from_mask(mask),
+        method=args.method,
+        modes=args.modes,
+        ordering=args.ordering,
+        pupil=args.pupil,
+        dtype=_DTYPES[args.dtype],
+        remove=args.remove,
+        laplacian=args.laplacian,
+        mesh_vertices=args.mesh_vertices,
+        angular_balance=not args.no_angular_balance,
+    )
+    started = time.perf_counter()
+    result = fitter.fit(wavefront, residual=True)
+    fit_seconds = time.perf_counter() - started
+    fitted = fitter.surface(result.coefficients)
+    if args.save_fit:
+        np.save(args.save_fit, fitted)
+    truth_error = None
+    if truth is not None:
+        truth_view = truth if args.remove is None else truth - (wavefront - result.residual_map - fitted)
+        truth_error = float(np.sqrt(np.nanmean((fitted - truth_view) ** 2)))
+    report = fit_report(source, fitter, result, fit_seconds, truth_error)
+    if args.json:
+        print(json.dumps(report))
+    else:
+        print(format_report(report))
+    return 0
+
+
+def fit_report(
+    source: str,
+    fitter: Fitter,
+    result: FitResult,
+    fit_seconds: float,
+    truth_error_rms: float | None = None,
+) -> dict[str, Any]:
+    """The JSON object ``wavestack fit --json`` prints."""
+    basis = result.basis
+    diagnostics = fitter.diagnostics.as_dict()
+    timings = dict(diagnostics.pop("timings"))
+    timings["fit"] = fit_seconds
+    report: dict[str, Any] = {
+        "source": source,
+        "method": basis.method,
+        "modes": len(basis.modes),
+        "ordering": basis.ordering,
+        "first_index": basis.first_index,
+        "normalisation": basis.normalisation,
+        "mode_indices": [list(nm) for nm in basis.modes],
+        "coefficients": result.coefficients.tolist(),
+        "residual_rms": result.residual_rms,
+        "residual_pv": result.residual_pv,
+        "valid_pixels": result.valid_count,
+        "topology": fitter.aperture.topology.value,
+        "pupil": basis.pupil.as_dict(),
+        "dtype": fitter.dtype.name,
+        "diagnostics": diagnostics,
+        "timings": timings,
+    }
+    if result.circle_coefficients is not None:
+        report["circle_coefficients"] = result.circle_coefficients.tolist()
+    if result.removed is not None:
+        report["removed"] = result.removed.as_dict()
+    if truth_error_rms is not None:
+        report["truth_error_rms"] = truth_error_rms
+    return report
+
+
+def format_report(report: dict[str, Any]) -> str:
+    """Human-readable form of :func:`fit_report`'s object."""
+    pupil = report["pupil"]
+    diagnostics = report["diagnostics"]
+    lines = [
+        f"source      {report['source']}",
+        f"aperture    {report['topology']}, {report['valid_pixels']} valid pixels; pupil centre "
+        f"(col {pupil['cx']:.2f}, row {pupil['cy']:.2f}), radius {pupil['radius']:.2f} px",
+        f"fit         {report['method']}, {report['modes']} {report['ordering']} modes, "
+        f"{report['normalisation']} normalisation, {report['dtype']}; "
+        f"kappa(G) {diagnostics['gram_condition']:.4g}, noise gain {diagnostics['noise_gain']:.3g}",
+        f"timing      build {report['timings']['total'] * 1e3:.1f} ms, "
+        f"fit {report['timings']['fit'] * 1e3:.2f} ms",
+        f"residual    RMS {report['residual_rms']:.4g}, PV {report['residual_pv']:.4g} (map units)",
+    ]
+    if diagnostics["noise_gain"] > _NOISE_GAIN_WARNING:
+        lines.append(
+            f"warning     noise gain {diagnostics['noise_gain']:.3g}: these modes are nearly "
+            "degenerate on this aperture, so noise swamps the individual coefficients even where "
+            "the fitted map is good; fit fewer modes or map the aperture (--method csf-qcm)"
+        )
+    if "truth_error_rms" in report:
+        lines.append(f"truth       fitted map vs noise-free truth: RMS {report['truth_error_rms']:.3g}")
+    if "removed" in report:
+        removed = report["removed"]
+        power = "" if removed["power"] is None else f", power {removed['power']:.4g}"
+        lines.append(
+            f"removed     piston {removed['piston']:.4g}, tilt x {removed['tilt_x']:.4g}, "
+            f"tilt y {removed['tilt_y']:.4g}{power} (at radius {removed['radius_px']:.1f} px)"
+        )
+    lines.append("")
+    lines.append(f"{'j':>4}  {'(n, m)':>9}  {'name':<24} {'coefficient':>13}")
+    for offset, ((n, m), value) in enumerate(zip(report["mode_indices"], report["coefficients"])):
+        j = report["first_index"] + offset
+        lines.append(f"{j:>4}  {f'({n}, {m})':>9}  {mode_name(n, m):<24} {value:>13.6g}")
+    return "\n".join(lines)
+
+
+COMMAND = Command(
+    "fit",
+    help="fit Zernike terms to a wavefront map (.npy)",
+    description="Fit Zernike terms to a 2-D wavefront map (.npy, NaN outside the aperture).",
+    add_arguments=add_fit_arguments, handler=run_fit,
+)

@@ -1,0 +1,61 @@
+"""``wavestack replay FILE.h5``: run the pipeline again on a recording."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from wavestack.cli.command import Command
+from wavestack.recording import RecordingReader
+from wavestack.recording.replay import recorded_config, replay
+from wavestack.config import load_station_config
+
+
+def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``wavestack replay``."""
+    parser.add_argument("recording", metavar="FILE.h5", help="a recording made by wavestack run --record")
+    parser.add_argument("--config", type=Path,
+                        help="process with this station file's [processing] instead of the recorded one")
+    parser.add_argument("--json", action="store_true", help="one JSON object per line, then a summary")
+
+
+def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Replay a recording; returns the exit status."""
+    out = sys.stdout
+    count = valid = 0
+    worst = 0.0
+    compared = 0
+    with RecordingReader(args.recording) as reader:
+        config = load_station_config(args.config) if args.config else recorded_config(reader, args.recording)
+        for result in replay(reader, config, same_settings=args.config is None):
+            count += 1
+            valid += result.processed.valid
+            if result.difference_rms is not None:
+                compared += 1
+                worst = max(worst, result.difference_rms)
+            if args.json:
+                out.write(json.dumps(result.to_json()) + "\n")
+            else:
+                p = result.processed
+                state = "valid" if p.valid else f"invalid ({p.reason})"
+                fitter = p.choice.kind if p.choice else (p.fitter_kind or "-")
+                diff = "" if result.difference_rms is None else f", differs from the recording by {result.difference_rms:.2e} waves rms"
+                out.write(f"result {result.index}: {state}, fitter {fitter}{diff}\n")
+    summary = {"type": "summary", "results": count, "valid": valid, "compared": compared,
+               "max_difference_rms": worst if compared else None}
+    if args.json:
+        out.write(json.dumps(summary) + "\n")
+    else:
+        out.write(f"{count} results replayed ({valid} valid); {compared} compared with the recording, "
+                  f"largest difference {worst:.2e} waves rms\n")
+    return 0
+
+
+COMMAND = Command(
+    "replay",
+    help="run the pipeline again on a recording (same or other fit settings)",
+    description="Recompute every result of a recording made with wavestack run --record.",
+    add_arguments=add_replay_arguments, handler=run_replay,
+)

@@ -1,0 +1,64 @@
+"""``wavestack sim DEVICE``: run one simulated instrument on its real transport until stopped.
+
+Each simulator prints exactly one line, flushed at once, saying where to connect (``pty /dev/pts/N``
+or ``listening 127.0.0.1:PORT``), then serves until Ctrl-C or SIGTERM. Any serial or Modbus tool
+can then talk to it, not only wavestack.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+from wavestack.cli.command import Command
+from wavestack.cli.signals import stop_on_signals
+
+
+def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
+    """Subcommands of ``wavestack sim``, one per simulated device."""
+    devices = parser.add_subparsers(dest="device", required=True, metavar="DEVICE")
+    pzt = devices.add_parser("pzt", help="Thorlabs MDT693B piezo controller on a pseudo-terminal",
+                             description="Serve the simulated MDT693B on a pseudo-terminal; prints 'pty PATH'.")
+    pzt.add_argument("--config", type=Path, help="TOML with [pzt] and [pzt.simulator] (default: built in)")
+    plc = devices.add_parser("plc", help="polishing-station PLC on Modbus/TCP",
+                             description="Serve the simulated polishing-station PLC; prints 'listening HOST:PORT'.")
+    plc.add_argument("--config", type=Path, help="TOML register map and model (default: built in)")
+    plc.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    plc.add_argument("--port", type=int, default=0, help="TCP port; 0 picks a free one (default)")
+    plc.add_argument("--allow-remote", action="store_true",
+                     help="allow a non-loopback host (Modbus/TCP has no authentication)")
+
+
+def _announce(line: str) -> None:
+    print(line, flush=True)
+
+
+def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Run the chosen simulator until interrupted; returns the exit status."""
+    stop = threading.Event()
+    runner: Callable[[], None]
+    if args.device == "pzt":
+        from wavestack.cli.sim_pzt import run_pzt_simulator
+
+        def runner() -> None:
+            run_pzt_simulator(args.config, _announce, stop)
+    else:
+        from wavestack.cli.sim_plc import run_plc_simulator
+
+        def runner() -> None:
+            run_plc_simulator(args.config, args.host, args.port, args.allow_remote, _announce, stop)
+    with stop_on_signals(stop):
+        runner()
+    print(f"wavestack sim {args.device}: stopped", file=sys.stderr)
+    return 0
+
+
+COMMAND = Command(
+    "sim",
+    help="run a simulated instrument standalone (pzt, plc)",
+    description="Run one simulated instrument on its real transport until Ctrl-C or SIGTERM.",
+    add_arguments=add_sim_arguments, handler=run_sim,
+)

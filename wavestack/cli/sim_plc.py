@@ -1,0 +1,77 @@
+"""``wavestack sim plc``: serve the simulated polishing-station PLC on Modbus/TCP until stopped."""
+
+from __future__ import annotations
+
+import ipaddress
+import logging
+import threading
+from collections.abc import Callable
+from pathlib import Path
+
+from wavestack.config import ConfigError, load_plc_config
+from wavestack.simulators.plc.server import PlcSimulator
+
+__all__ = ["is_loopback", "run_plc_simulator"]
+
+_log = logging.getLogger(__name__)
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` is ``localhost`` or a loopback IP literal (127.0.0.0/8, ::1)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remote: bool,
+                      announce: Callable[[str], None], stop: threading.Event) -> None:
+    """Run the PLC simulator until ``stop`` is set.
+
+    Parameters
+    ----------
+    config_path
+        TOML with ``[plc]`` and ``[plc.simulator.polishing]``; None for the built-in defaults
+        (equal to ``config/plc-sim.toml``).
+    host, port
+        Where to listen; port 0 picks a free port.
+    allow_remote
+        Allow a non-loopback host. Modbus/TCP has no authentication: anyone who can reach the port
+        can command the (simulated) machine.
+    announce
+        Called once with ``"listening HOST:PORT"`` when the server accepts connections.
+    stop
+        Set it to stop the server (the CLI sets it on SIGINT/SIGTERM).
+
+    Raises
+    ------
+    ValueError
+        A non-loopback host without ``allow_remote``, a port outside 0..65535, or a host/port the
+        server cannot bind.
+    ConfigError
+        A bad configuration, or one without ``[plc.simulator]``.
+    """
+    if not is_loopback(host) and not allow_remote:
+        raise ValueError(f"refusing to serve the PLC simulator on {host!r}: Modbus/TCP has no authentication, "
+                         "so only a loopback address (127.0.0.1, ::1, localhost) is allowed; pass --allow-remote "
+                         "to serve on another interface")
+    if not 0 <= port <= 65535:
+        raise ValueError(f"port must be 0..65535 (0 = any free port), got {port}")
+    config = load_plc_config(config_path)
+    if config.simulator is None:
+        raise ConfigError(f"{config.source}: no [plc.simulator] table; the simulator needs the polishing model "
+                          "(see config/plc-sim.toml)")
+    simulator = PlcSimulator(config.sim_layout(), config.polishing_station(), host=host, port=port)
+    try:
+        simulator.start()
+    except OSError as error:
+        raise ValueError(f"cannot serve the PLC simulator on {host}:{port}: {error}") from None
+    try:
+        announce(f"listening {host}:{simulator.port}")
+        while not stop.wait(0.1):
+            pass
+    finally:
+        simulator.stop()
+        _log.info("PLC simulator on %s:%d stopped", host, simulator.port)

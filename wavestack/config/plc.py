@@ -1,0 +1,237 @@
+"""Configuration of the polishing-station PLC link and of its simulator (TOML ``[plc]``).
+
+One file describes both ends: ``[plc]`` holds what the driver needs (address, unit id, register
+map, float32 byte orders, function codes, timing) and what the PLC is configured with (watchdog
+timeout); ``[plc.simulator.polishing]`` holds the simulated machine's model. ``config/plc-sim.toml``
+is the simulator's file and equals the built-in defaults; ``config/plc-example.toml`` is a commented
+example for a real PLC.
+
+This module is the only place that knows both the driver and the simulator: it turns one checked
+configuration into the driver's :class:`RegisterMap` and :class:`LinkTiming` and into the
+simulator's own :class:`PlcSimLayout` and :class:`PolishingStation`.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from wavestack.config.schema import ConfigError, device_tables, load_toml, parse_section, setting
+from wavestack.drivers.plc.register_map import RegisterMap
+from wavestack.drivers.plc.transport import LinkTiming
+from wavestack.simulators.plc.polishing import PolishingStation
+from wavestack.simulators.plc.program import PlcSimLayout
+
+__all__ = ["PlcConfig", "PlcLinkSettings", "PlcSimulatorSettings", "PolishingModelSettings", "load_plc_config",
+           "parse_plc_config"]
+
+WordOrderName = Literal["ABCD", "CDAB", "BADC", "DCBA"]
+
+_TCP_URL = re.compile(r"^tcp://(?P<host>\[[0-9A-Fa-f:.]+\]|[^:/\s\[\]]+):(?P<port>\d{1,5})/?$")
+#: A 15-term (Noll 1..15) starting surface, nm: astigmatism, coma, spherical and friends.
+DEFAULT_SURFACE_NM = (0.0, 0.0, 0.0, 120.0, -45.0, 30.0, 60.0, -25.0, 18.0, 12.0, -9.0, 40.0, 6.0, -5.0, 4.0)
+
+
+@dataclass(frozen=True)
+class PlcLinkSettings:
+    """``[plc]``: where the PLC is, its register map, byte orders, function codes and timing."""
+
+    url: str = setting("tcp://127.0.0.1:5020", url_kinds=("tcp", "sim"),
+                       doc="Modbus/TCP address, tcp://HOST:PORT; sim://plc: a station starts the simulator")
+    unit_id: int = setting(1, minimum=0, maximum=255, doc="Modbus unit (slave) id")
+    word_order: WordOrderName = setting("CDAB", doc="float32 byte order of every block: ABCD, CDAB, BADC, DCBA")
+    self_check_word_order: WordOrderName | None = setting(None, doc="byte order of the self-check constant")
+    command_word_order: WordOrderName | None = setting(None, doc="byte order of the command block's floats")
+    output_word_order: WordOrderName | None = setting(None, doc="byte order of the output block's floats")
+    self_check_register: int = setting(0, minimum=0, maximum=65534, doc="first of 2 registers: float32 constant")
+    self_check_value: float = setting(12345.678, doc="the constant the self-check must read")
+    heartbeat_register: int = setting(10, minimum=0, maximum=65535, doc="host increments it every cycle")
+    rearm_register: int = setting(11, minimum=0, maximum=65535, doc="write 1 to re-arm the watchdog")
+    status_register: int = setting(20, minimum=0, maximum=65533,
+                                   doc="first of 3 registers: status word, last accepted id, heartbeat echo")
+    command_block: tuple[int, int] = setting((100, 32), minimum=0, maximum=65535,
+                                             doc="[start, count], count = 2 + 2 x terms")
+    output_block: tuple[int, int] = setting((200, 32), minimum=0, maximum=65535,
+                                            doc="[start, count], read-only machine outputs")
+    read_function_code: Literal[3, 4] = setting(3, doc="3 holding or 4 input registers")
+    single_write_function_code: Literal[6, 16] = setting(6, doc="heartbeat and re-arm writes")
+    command_write_function_code: Literal[16] = setting(16, doc="command block writes")
+    watchdog_timeout_s: float = setting(2.0, minimum=0.01, maximum=600.0, doc="PLC watchdog timeout")
+    io_timeout_s: float = setting(0.5, minimum=0.001, maximum=60.0, doc="longest wait for one reply")
+    reconnect_initial_s: float = setting(0.05, minimum=0.001, maximum=60.0, doc="first reconnect back-off")
+    reconnect_max_s: float = setting(2.0, minimum=0.001, maximum=600.0, doc="longest reconnect back-off")
+    command_retries: int = setting(2, minimum=0, maximum=10, doc="resends of a command after a lost reply")
+    heartbeat_echo_max_lag: int = setting(2, minimum=0, maximum=1000, doc="beats the echo may trail")
+
+    @property
+    def simulated(self) -> bool:
+        """True for ``sim://plc``: the station runs the simulator itself on a free loopback port."""
+        return self.url.startswith("sim://")
+
+    @property
+    def host(self) -> str:
+        """Host part of :attr:`url`."""
+        return _split_url(self.url)[0]
+
+    @property
+    def port(self) -> int:
+        """Port part of :attr:`url`."""
+        return _split_url(self.url)[1]
+
+    @property
+    def n_terms(self) -> int:
+        """Removal terms the command block carries."""
+        return (self.command_block[1] - 2) // 2
+
+    def register_map(self) -> RegisterMap:
+        """The driver's register map (raises ValueError for an inconsistent map)."""
+        return RegisterMap.build(
+            unit_id=self.unit_id, word_order=self.word_order, self_check_register=self.self_check_register,
+            self_check_value=self.self_check_value, heartbeat_register=self.heartbeat_register,
+            rearm_register=self.rearm_register, status_register=self.status_register,
+            command_block=self.command_block, output_block=self.output_block,
+            read_function=self.read_function_code, single_write_function=self.single_write_function_code,
+            block_write_function=self.command_write_function_code,
+            self_check_word_order=self.self_check_word_order, command_word_order=self.command_word_order,
+            output_word_order=self.output_word_order)
+
+    def link_timing(self) -> LinkTiming:
+        """The driver's timing and retry policy."""
+        return LinkTiming(io_timeout_s=self.io_timeout_s, reconnect_initial_s=self.reconnect_initial_s,
+                          reconnect_max_s=self.reconnect_max_s, command_retries=self.command_retries,
+                          heartbeat_echo_max_lag=self.heartbeat_echo_max_lag)
+
+
+@dataclass(frozen=True)
+class PolishingModelSettings:
+    """``[plc.simulator.polishing]``: the simulated machine (see ``simulators/plc/polishing.py``)."""
+
+    initial_surface_nm: tuple[float, ...] = setting(DEFAULT_SURFACE_NM,
+                                                    doc="starting Zernike coefficients (Noll 1..n), nm")
+    efficiency: float = setting(0.8, minimum=0.001, maximum=1.0, doc="mean fraction of the commanded removal")
+    efficiency_spread: float = setting(0.05, minimum=0.0, maximum=0.99, doc="relative per-term scatter")
+    noise_nm: float = setting(0.5, minimum=0.0, maximum=1000.0, doc="process noise per term and pass, nm")
+    max_removal_nm: float = setting(500.0, minimum=0.001, maximum=1e6, doc="largest |removal| per term, nm")
+    seed: int = setting(0, minimum=0, doc="random seed of the model")
+    pass_duration_s: float = setting(0.0, minimum=0.0, maximum=3600.0, doc="time one pass keeps the PLC busy")
+
+
+@dataclass(frozen=True)
+class PlcSimulatorSettings:
+    """``[plc.simulator]``: what only the simulator needs."""
+
+    polishing: PolishingModelSettings = PolishingModelSettings()
+
+
+@dataclass(frozen=True)
+class PlcConfig:
+    """A checked PLC configuration.
+
+    Attributes
+    ----------
+    link
+        The ``[plc]`` table.
+    simulator
+        The ``[plc.simulator]`` table, None when the file has none (a real PLC).
+    source
+        The file it came from, or ``"built-in defaults"``.
+    """
+
+    link: PlcLinkSettings
+    simulator: PlcSimulatorSettings | None
+    source: str
+
+    def sim_layout(self) -> PlcSimLayout:
+        """The simulator's register layout, from the same settings as the driver's map."""
+        link = self.link
+        return PlcSimLayout(
+            unit_id=link.unit_id, self_check_register=link.self_check_register,
+            self_check_value=link.self_check_value,
+            self_check_word_order=link.self_check_word_order or link.word_order,
+            heartbeat_register=link.heartbeat_register, rearm_register=link.rearm_register,
+            status_register=link.status_register, command_block=link.command_block,
+            output_block=link.output_block, command_word_order=link.command_word_order or link.word_order,
+            output_word_order=link.output_word_order or link.word_order,
+            watchdog_timeout_s=link.watchdog_timeout_s,
+            pass_duration_s=self.simulator.polishing.pass_duration_s if self.simulator else 0.0)
+
+    def polishing_station(self) -> PolishingStation:
+        """A fresh simulated machine from ``[plc.simulator.polishing]`` (defaults if absent)."""
+        model = (self.simulator or PlcSimulatorSettings()).polishing
+        return PolishingStation(model.initial_surface_nm, efficiency=model.efficiency,
+                                efficiency_spread=model.efficiency_spread, noise_nm=model.noise_nm,
+                                max_removal_nm=model.max_removal_nm, seed=model.seed)
+
+
+def parse_plc_config(document: Mapping[str, Any], *, source: str) -> PlcConfig:
+    """Build and check a :class:`PlcConfig` from a parsed TOML document holding table ``plc``.
+
+    Raises
+    ------
+    ConfigError
+        As :func:`load_plc_config`.
+    """
+    link_table, simulator_table = device_tables(document, "plc", what="the PLC link", source=source)
+    link = parse_section(PlcLinkSettings, link_table, source=source, section="plc")
+    simulator = (None if simulator_table is None else
+                 parse_section(PlcSimulatorSettings, simulator_table, source=source, section="plc.simulator"))
+    config = PlcConfig(link, simulator, source)
+    _check_consistency(config)
+    return config
+
+
+def load_plc_config(path: str | Path | None) -> PlcConfig:
+    """Read and check the ``[plc]`` table of a TOML file (None: the built-in simulator defaults).
+
+    Other top-level tables are ignored, so one station file can hold every device.
+
+    Raises
+    ------
+    ConfigError
+        A missing file or ``[plc]`` table, unknown keys, wrong types or ranges, a URL that is not
+        ``tcp://HOST:PORT``, an inconsistent register map (overlaps, counts, function codes) or an
+        initial surface whose length differs from the command block's number of terms.
+    """
+    if path is None:
+        config = PlcConfig(PlcLinkSettings(), PlcSimulatorSettings(), "built-in defaults")
+        _check_consistency(config)
+        return config
+    return parse_plc_config(load_toml(path), source=str(path))
+
+
+def _split_url(url: str) -> tuple[str, int]:
+    if url == "sim://plc":
+        return "127.0.0.1", 0  # the simulator picks a free port
+    match = _TCP_URL.match(url)
+    if match is None:
+        raise ValueError(f"expected tcp://HOST:PORT, got {url!r}")
+    port = int(match.group("port"))
+    if not 1 <= port <= 65535:
+        raise ValueError(f"port must be 1..65535 in {url!r}")
+    return match.group("host").strip("[]"), port
+
+
+def _check_consistency(config: PlcConfig) -> None:
+    link, where = config.link, f"{config.source}: [plc]"
+    try:
+        _split_url(link.url)
+    except ValueError as error:
+        raise ConfigError(f"{where} url: {error}") from None
+    try:
+        link.register_map()
+    except ValueError as error:
+        raise ConfigError(f"{where} register map: {error}") from None
+    if link.reconnect_initial_s > link.reconnect_max_s:
+        raise ConfigError(f"{where} reconnect_initial_s ({link.reconnect_initial_s}) must not exceed "
+                          f"reconnect_max_s ({link.reconnect_max_s})")
+    if link.simulated and config.simulator is None:
+        raise ConfigError(f"{where} url: sim://plc needs a [plc.simulator] table (the simulated machine)")
+    if config.simulator is not None:
+        surface = config.simulator.polishing.initial_surface_nm
+        if len(surface) != link.n_terms:
+            raise ConfigError(f"{config.source}: [plc.simulator.polishing] initial_surface_nm: expected "
+                              f"{link.n_terms} terms (command_block count {link.command_block[1]} = 2 + 2 x terms), "
+                              f"got {len(surface)}")

@@ -1,0 +1,231 @@
+"""A station's configuration: one TOML file, one table per device and per stage, all checked on load.
+
+Tables (see ``wavestack/config/default.toml``, the simulated station ``wavestack run`` uses by default):
+
+``[station]``
+    :class:`StationSettings`: the kind of station (``interferometer`` or ``shack-hartmann``),
+    timeouts, result age limit, wavelength.
+``[processing]``
+    :class:`~wavestack.config.processing.ProcessingSettings`: phase method, fit (interferometer).
+``[shack_hartmann]``
+    :class:`~wavestack.config.shack_hartmann.ShackHartmannSettings`: lenslet geometry, pupil,
+    modes (Shack-Hartmann station, which has no ``[processing]``, ``[pzt]`` or ``[bench]``).
+``[camera]``, ``[camera.simulator]``
+    :mod:`wavestack.config.camera`; ``url = "sim://u3v"`` makes the station build the simulated
+    bench (and then needs ``[optic]`` and, for phase shifting, ``[bench]``).
+``[pzt]``, ``[pzt.simulator]``
+    :mod:`wavestack.config.pzt`; required for the ``psi`` method.
+``[plc]``, ``[plc.simulator]``
+    :mod:`wavestack.config.plc`; optional. ``url = "sim://plc"`` runs the simulated PLC.
+``[outputs]``
+    :class:`OutputSettings`: what goes to the PLC, through the safety stage.
+``[optic]`` (with ``[optic.aperture]``), ``[bench]``
+    The simulated test optic and how the simulated piezo moves its fringes.
+``[lenslets]``
+    The simulated lenslet array (:class:`~wavestack.simulators.spots.LensletArraySettings`) of a
+    simulated Shack-Hartmann camera. ``pitch_px``, ``offset_px`` and ``grid_shape`` default to
+    the ``[shack_hartmann]`` values, ``gain_px`` to ``f lambda / p**2`` from them and the
+    wavelength, ``bit_depth`` to the simulated camera's pixel format.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from wavestack.config._checks import BIT_DEPTH
+from wavestack.config.camera import CameraSettings, CameraSimulatorSettings, parse_camera_config
+from wavestack.config.schema import ConfigError, load_toml, parse_section, setting
+from wavestack.config.plc import PlcConfig, parse_plc_config
+from wavestack.config.pzt import PiezoSettings, PiezoSimulatorSettings, parse_pzt_config
+from wavestack.simulators.bench import PiezoCoupling
+from wavestack.simulators.optic import OpticSettings
+from wavestack.simulators.spots import LensletArraySettings
+from wavestack.config.processing import ProcessingSettings
+from wavestack.config.shack_hartmann import ShackHartmannSettings
+
+_TABLES = ("station", "processing", "camera", "pzt", "plc", "outputs", "optic", "bench", "shack_hartmann",
+           "lenslets")
+_SHACK_HARTMANN_ONLY = ("shack_hartmann", "lenslets")
+_INTERFEROMETER_ONLY = ("processing", "pzt", "bench")
+#: The simulated station, shipped inside the package (the one default station file).
+DEFAULT_CONFIG = Path(__file__).resolve().parent / "default.toml"
+
+
+@dataclass(frozen=True)
+class StationSettings:
+    """``[station]``: the run as a whole."""
+
+    kind: Literal["interferometer", "shack-hartmann"] = setting(
+        "interferometer", doc="phase maps from fringes, or slopes from a lenslet array")
+    wavelength_nm: float = setting(632.8, minimum=100.0, maximum=20000.0, doc="test wavelength, nm")
+    frame_timeout_s: float = setting(2.0, minimum=0.01, maximum=60.0, doc="longest wait for a frame or set, s")
+    max_result_age_s: float = setting(1.0, minimum=0.01, maximum=60.0,
+                                      doc="an older result is stale and never forwarded, s")
+    reconnect_max_s: float = setting(5.0, minimum=0.01, maximum=600.0, doc="longest reconnect back-off, s")
+    set_ring_capacity: int = setting(2, minimum=1, maximum=64, doc="phase-shifted sets held for the pipeline")
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """``[outputs]``: the removal command sent to the polishing PLC for each valid result.
+
+    The command per Zernike term is ``gain * surface_nm`` for terms from ``first_term`` on (piston
+    and tilts are alignment, not polishing), ``surface_nm = wavefront_waves * wavelength_nm *
+    surface_factor`` (0.5 for a surface seen in reflection, double pass). It then passes the safety
+    stage: clipped to +-``max_removal_nm``, changed by at most ``max_step_nm`` per update.
+    """
+
+    enabled: bool = setting(True, doc="send removal commands when a PLC is configured")
+    gain: float = setting(0.5, minimum=0.0, maximum=1.0, doc="fraction of the measured error commanded")
+    surface_factor: float = setting(0.5, minimum=0.01, maximum=10.0, doc="surface per wavefront")
+    first_term: int = setting(4, minimum=1, maximum=231, doc="first Noll term commanded (4 = defocus)")
+    max_removal_nm: float = setting(200.0, minimum=0.0, maximum=1e5, doc="drive limit per term, nm")
+    max_step_nm: float = setting(50.0, minimum=1e-6, maximum=1e5, doc="largest change per update, nm")
+    passes: int = setting(1, minimum=1, maximum=100)
+
+
+@dataclass(frozen=True, eq=False)
+class StationConfig:
+    """A checked station configuration (every table parsed) and its source text."""
+
+    source: str
+    text: str
+    station: StationSettings
+    processing: ProcessingSettings
+    camera: CameraSettings
+    camera_simulator: CameraSimulatorSettings
+    pzt: PiezoSettings | None
+    pzt_simulator: PiezoSimulatorSettings | None
+    plc: PlcConfig | None
+    outputs: OutputSettings
+    optic: OpticSettings | None
+    bench: PiezoCoupling
+    shack_hartmann: ShackHartmannSettings | None = None
+    lenslets: LensletArraySettings | None = None
+
+    @property
+    def phase_stepping(self) -> bool:
+        """True for an interferometer stepping a piezo (triggered camera, phase-shifted sets)."""
+        return self.station.kind == "interferometer" and self.processing.method == "psi"
+
+
+def _section(schema: type, document: Mapping[str, Any], name: str, source: str) -> Any:
+    return parse_section(schema, document.get(name, {}), source=source, section=name)
+
+
+def parse_station_config(text: str, *, source: str) -> StationConfig:
+    """Check a station configuration given as TOML text.
+
+    Raises
+    ------
+    ConfigError
+        Malformed TOML, an unknown top-level table, or any key error of any table; also a
+        ``psi`` station without ``[pzt]``, or a simulated camera without ``[optic]``; a
+        Shack-Hartmann station without ``[shack_hartmann]`` (or, simulated, ``[lenslets]``) or
+        with an interferometer's table, and the reverse.
+    """
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{source}: not valid TOML ({error})") from None
+    unknown = sorted(set(document) - set(_TABLES))
+    if unknown:
+        raise ConfigError(f"{source}: unknown table [{unknown[0]}]; expected tables: {', '.join(_TABLES)}")
+    station = _section(StationSettings, document, "station", source)
+    if station.kind == "shack-hartmann":
+        return _parse_shack_hartmann(document, station, text=text, source=source)
+    misplaced = [name for name in _SHACK_HARTMANN_ONLY if name in document]
+    if misplaced:
+        raise ConfigError(f"{source}: [{misplaced[0]}] belongs to a Shack-Hartmann station; "
+                          "expected [station] kind = 'shack-hartmann' with it")
+    processing = _section(ProcessingSettings, document, "processing", source)
+    camera, camera_simulator = parse_camera_config(document, source=source)
+    pzt = pzt_simulator = None
+    if "pzt" in document:
+        pzt, pzt_simulator = parse_pzt_config(document, source=source)
+    elif processing.method == "psi":
+        raise ConfigError(f"{source}: [processing] method = 'psi' needs a [pzt] table (the phase shifter)")
+    plc = parse_plc_config(document, source=source) if "plc" in document else None
+    optic = None
+    if camera.simulated:
+        if "optic" not in document:
+            raise ConfigError(f"{source}: [camera] url = 'sim://u3v' needs an [optic] table (the simulated optic)")
+        optic = _section(OpticSettings, document, "optic", source)
+    return StationConfig(
+        source=source, text=text, station=station,
+        processing=processing, camera=camera, camera_simulator=camera_simulator,
+        pzt=pzt, pzt_simulator=pzt_simulator, plc=plc,
+        outputs=_section(OutputSettings, document, "outputs", source),
+        optic=optic, bench=_section(PiezoCoupling, document, "bench", source),
+    )
+
+
+def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings, *, text: str,
+                          source: str) -> StationConfig:
+    """The tables of a ``kind = "shack-hartmann"`` station.
+
+    Its ``processing`` is derived, not read: one frame per set, the ``[shack_hartmann]`` modes and
+    ordering, nothing removed -- the view of the processing that the result records, recordings
+    and live view share with an interferometer station.
+    """
+    misplaced = [name for name in _INTERFEROMETER_ONLY if name in document]
+    if misplaced:
+        raise ConfigError(f"{source}: [{misplaced[0]}] belongs to an interferometer station; a [station] "
+                          "kind = 'shack-hartmann' station is configured by [shack_hartmann]")
+    if "shack_hartmann" not in document:
+        raise ConfigError(f"{source}: [station] kind = 'shack-hartmann' needs a [shack_hartmann] table "
+                          "(lenslet pitch, focal length, pixel size, pupil)")
+    sensor = _section(ShackHartmannSettings, document, "shack_hartmann", source)
+    camera, camera_simulator = parse_camera_config(document, source=source)
+    optic = lenslets = None
+    if camera.simulated:
+        missing = [name for name in ("optic", "lenslets") if name not in document]
+        if missing:
+            raise ConfigError(f"{source}: a simulated Shack-Hartmann camera (url = 'sim://u3v') needs "
+                              f"[{missing[0]}] (the simulated optic and lenslet array)")
+        optic = _section(OpticSettings, document, "optic", source)
+        lenslets = _simulated_lenslets(document["lenslets"], sensor, station, camera_simulator, source)
+    return StationConfig(
+        source=source, text=text, station=station,
+        processing=ProcessingSettings(method="carrier", modes=sensor.modes, ordering=sensor.ordering, remove="none"),
+        camera=camera, camera_simulator=camera_simulator, pzt=None, pzt_simulator=None,
+        plc=parse_plc_config(document, source=source) if "plc" in document else None,
+        outputs=_section(OutputSettings, document, "outputs", source),
+        optic=optic, bench=PiezoCoupling(), shack_hartmann=sensor, lenslets=lenslets,
+    )
+
+
+def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: StationSettings,
+                        camera: CameraSimulatorSettings, source: str) -> LensletArraySettings:
+    """``[lenslets]``, its absent geometry taken from ``[shack_hartmann]`` (module notes)."""
+    depth = BIT_DEPTH[camera.pixel_format]
+    try:
+        parsed = parse_section(LensletArraySettings, table, source=source, section="lenslets")
+        given = set(table)
+        derived: dict[str, Any] = {name: getattr(sensor, name) for name in ("pitch_px", "offset_px", "grid_shape")
+                                   if name not in given}
+        if "gain_px" not in given:
+            derived["gain_px"] = sensor.gain_px(station.wavelength_nm)
+        if "bit_depth" not in given:
+            derived["bit_depth"] = depth
+        lenslets = dataclasses.replace(parsed, **derived)
+    except ConfigError:
+        raise
+    except ValueError as error:  # the simulator's own checks
+        raise ConfigError(f"{source}: [lenslets] {error}") from None
+    if lenslets.bit_depth != depth:
+        raise ConfigError(f"{source}: [lenslets] bit_depth {lenslets.bit_depth} does not match "
+                          f"[camera.simulator] pixel_format {camera.pixel_format!r} ({depth} bits)")
+    return lenslets
+
+
+def load_station_config(path: str | Path | None = None) -> StationConfig:
+    """Read and check a station file (None: the packaged ``default.toml``, the simulated station)."""
+    path = DEFAULT_CONFIG if path is None else Path(path)
+    load_toml(path)  # a missing or unreadable file gets its own clear message
+    return parse_station_config(path.read_text(encoding="utf-8"), source=str(path))

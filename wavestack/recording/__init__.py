@@ -1,0 +1,31 @@
+"""Station recording: frame sets, apertures, result rows and configuration in one HDF5 file.
+
+``wavestack run --record FILE.h5`` writes with :class:`RecordingWriter`; ``wavestack replay FILE.h5``
+reads back with :class:`RecordingReader`. Both are generic: a result row is any mapping of
+numbers, bools, strings and numeric arrays, so they do not know the station's result type.
+
+The work is split by concept: :mod:`wavestack.recording.format` (names, HDF5 layout, the
+result table), :mod:`wavestack.recording.writer` (appending and the crash-safe commit
+protocol), :mod:`wavestack.recording.reader` (reading committed rows back),
+:mod:`wavestack.recording.station_rows` (what the station writes: one fixed-shape row per
+result) and :mod:`wavestack.recording.replay` (the pipeline run again on a recording). This
+package re-exports the public names, so ``from wavestack.recording import RecordingWriter`` works.
+"""
+
+from __future__ import annotations
+
+from wavestack.recording.format import FORMAT_NAME, FORMAT_VERSION, ResultRow, RowValue
+from wavestack.recording.reader import RecordingReader
+from wavestack.recording.replay import ReplayedResult, recorded_config, replay
+from wavestack.recording.station_rows import (
+    FRAME_METADATA,
+    StationRecorder,
+    conventions,
+    open_recording,
+    recording_row,
+)
+from wavestack.recording.writer import RecordingWriter
+
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FRAME_METADATA", "RecordingReader", "RecordingWriter",
+           "ReplayedResult", "ResultRow", "RowValue", "StationRecorder", "conventions", "open_recording", "recorded_config", "recording_row",
+           "replay"]

@@ -1,0 +1,81 @@
+"""Run the pipeline again on a recording: the same frames, the same or different fit settings.
+
+With the recorded settings every result is recomputed on the fitter that ran it live (a ``qr``
+stand-in while the configured map was being built, then the configured fitter), so a replay
+reproduces the recorded coefficients; :attr:`ReplayedResult.difference_rms` says by how much.
+With other settings (another ``--config``) the fitters are built as those settings say,
+synchronously.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wavestack.config import StationConfig, parse_station_config
+from wavestack.recording.reader import RecordingReader
+from wavestack.station import InterferometerOutcome, SlopeOutcome, build_processor
+
+
+@dataclass(frozen=True, eq=False)
+class ReplayedResult:
+    """One recomputed result beside the recorded one."""
+
+    index: int
+    frame_ids: tuple[int, ...]
+    processed: InterferometerOutcome | SlopeOutcome
+    recorded_coefficients: np.ndarray | None
+    difference_rms: float | None
+
+    def to_json(self) -> dict[str, object]:
+        p = self.processed
+        coefficients = [] if p.coefficients_waves is None else [float(c) for c in p.coefficients_waves]
+        return {"type": "result", "index": self.index, "frame_ids": list(self.frame_ids), "valid": p.valid,
+                "reason": p.reason, "coefficients": coefficients,
+                "fitter": p.fitter_kind, "fitter_fallback": p.fitter_fallback,
+                "unwrap_path": p.unwrap_path, "difference_rms": self.difference_rms}
+
+
+def recorded_config(reader: RecordingReader, path: str | Path) -> StationConfig:
+    """The configuration the recording was made with."""
+    return parse_station_config(reader.config_toml, source=f"{path} (recorded configuration)")
+
+
+def replay(reader: RecordingReader, config: StationConfig, *, same_settings: bool) -> Iterator[ReplayedResult]:
+    """Recompute every recorded set.
+
+    Parameters
+    ----------
+    reader : RecordingReader
+    config : StationConfig
+        Settings to process with (the recorded ones, or others).
+    same_settings : bool
+        Reproduce each result's live fitter (the recorded settings).
+
+    Yields
+    ------
+    ReplayedResult
+    """
+    recorded = reader.results()
+    rows = {int(i): k for k, i in enumerate(recorded.get("index", []))}
+    processor = build_processor(config, background_builds=False)
+    try:
+        for position in range(reader.n_sets):
+            set_index = int(reader.set_indices[position])
+            frames = reader.read_set(position)
+            row = rows.get(set_index)
+            method = None
+            if same_settings and row is not None and recorded["fitter"][row]:
+                method = str(recorded["fitter"][row])
+            processed = processor.process([f.pixels for f in frames], fitter_method=method)
+            live = None if row is None or not recorded["valid"][row] else np.asarray(recorded["coefficients"][row])
+            difference = None
+            found = processed.coefficients_waves
+            if live is not None and found is not None and live.shape == found.shape:
+                difference = float(np.sqrt(np.mean((found - live) ** 2)))
+            yield ReplayedResult(set_index, tuple(f.frame_id for f in frames), processed, live, difference)
+    finally:
+        processor.close()

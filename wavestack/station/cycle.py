@@ -1,0 +1,138 @@
+"""One cycle of the station as values: a processor's outcome -> the result -> the record every sink gets.
+
+:func:`make_result` is pure: it turns a processor's frozen outcome (an
+:class:`~wavestack.station.interferometer.InterferometerOutcome` or a
+:class:`~wavestack.station.shack_hartmann.SlopeOutcome`, both seen through
+:class:`ProcessorOutcome`) and the cycle's facts into a
+:class:`~wavestack.station.results.StationResult`. The output stage then sends the result and
+returns what it sent; the :class:`CycleRecord` holding both is what every sink receives.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wavestack.drivers.frames import Frame
+from wavestack.station.results import (
+    ApertureRecord,
+    Counters,
+    FitterDiagnostics,
+    OutputRecord,
+    StationResult,
+    TruthErrors,
+)
+from wavestack.station.shack_hartmann import LensletSlopes
+
+
+class ProcessorOutcome(Protocol):
+    """What both processors' outcomes tell the result (read-only)."""
+
+    @property
+    def valid(self) -> bool: ...
+    @property
+    def reason(self) -> str | None: ...
+    @property
+    def coefficients_waves(self) -> NDArray[np.float64] | None: ...
+    @property
+    def residual_rms(self) -> float: ...
+    @property
+    def fitter_kind(self) -> str | None: ...
+    @property
+    def fitter_fallback(self) -> bool: ...
+    @property
+    def normalisation(self) -> str: ...
+    @property
+    def diagnostics(self) -> FitterDiagnostics | None: ...
+    @property
+    def aperture_record(self) -> ApertureRecord | None: ...
+    @property
+    def aperture_changed(self) -> bool: ...
+    @property
+    def unwrap_path(self) -> str | None: ...
+    @property
+    def timings_s(self) -> dict[str, float]: ...
+    @property
+    def new_aperture_mask(self) -> NDArray[np.bool_] | None: ...
+
+
+def make_result(index: int, frames: tuple[Frame, ...], outcome: ProcessorOutcome, *, ordering: str,
+                counters: Counters, now_ns: int, truth: TruthErrors | None = None) -> StationResult:
+    """The result of one processed set (pure).
+
+    Parameters
+    ----------
+    index : int
+        Result number in this run.
+    frames : tuple of Frame
+        The set (non-empty); its first frame's host time is the exposure time.
+    outcome : ProcessorOutcome
+    ordering : str
+        The coefficients' Zernike ordering.
+    counters : Counters
+    now_ns : int
+        Host time the result is made (``time.time_ns``): the latency runs from the exposure to it.
+    truth : TruthErrors, optional
+        Simulated devices only.
+
+    Returns
+    -------
+    StationResult
+        Without ``output`` (the output stage adds what it sent).
+    """
+    exposure_ns = frames[0].host_time_ns
+    coefficients = outcome.coefficients_waves
+    return StationResult(
+        index=index, frame_ids=tuple(f.frame_id for f in frames), exposure_time_ns=exposure_ns,
+        latency_ms=(now_ns - exposure_ns) * 1e-6, valid=outcome.valid, reason=outcome.reason,
+        coefficients=tuple(float(c) for c in coefficients) if coefficients is not None else (),
+        ordering=ordering, normalisation=outcome.normalisation, units="waves", residual_rms=outcome.residual_rms,
+        fitter=outcome.fitter_kind, fitter_fallback=outcome.fitter_fallback,
+        fitter_diagnostics=outcome.diagnostics, aperture=outcome.aperture_record, unwrap_path=outcome.unwrap_path,
+        counters=counters, timings_ms={k: v * 1e3 for k, v in outcome.timings_s.items()},
+        truth_rms=truth.truth_rms if truth is not None else None,
+        truth_error_rms=truth.error_rms if truth is not None else None)
+
+
+def with_output(result: StationResult, output: OutputRecord | None, *, now_ns: int | None = None) -> StationResult:
+    """The result with what the output stage sent for it.
+
+    ``now_ns`` (``time.time_ns`` after the send): the latency then runs to the end of the PLC
+    exchange, as a result's latency always has (the result is complete once it is sent).
+    """
+    if output is None:
+        return result
+    if now_ns is None:
+        return replace(result, output=output)
+    return replace(result, output=output, latency_ms=(now_ns - result.exposure_time_ns) * 1e-6)
+
+
+@dataclass(frozen=True, eq=False)
+class CycleRecord:
+    """Everything a sink gets about one cycle.
+
+    Attributes
+    ----------
+    result : StationResult
+        The result, with what went to the PLC (``result.output``).
+    frames : tuple of Frame
+        The set (empty when the device was lost).
+    new_aperture_mask : ndarray of bool or None
+        The full-resolution aperture when this set started a new one (interferometer), for the
+        recording.
+    lenslets : LensletSlopes or None
+        Shack-Hartmann: the slopes per lenslet and the lenslets used (a frozen value).
+    """
+
+    result: StationResult
+    frames: tuple[Frame, ...] = ()
+    new_aperture_mask: NDArray[np.bool_] | None = None
+    lenslets: LensletSlopes | None = None
+
+
+#: A result sink: the live view, the JSON lines, the recording.
+ResultSink = Callable[[CycleRecord], None]

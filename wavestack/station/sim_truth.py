@@ -1,0 +1,110 @@
+"""The truth comparison of a simulated station: measured coefficients against the simulator's truth.
+
+Built by :func:`wavestack.station.devices.open_station_devices` for a simulated camera only (it
+is the one station module beside ``devices`` that knows simulator types); the loop sees it as a
+:class:`~wavestack.station.truth.TruthCheck`.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wavestack.drivers.frames import Frame
+from wavestack.pipeline import InvalidFrame
+from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
+from wavestack.simulators.spots import SpotTruth
+from wavestack.station.fitter_cache import FitterChoice
+from wavestack.station.interferometer import InterferometerOutcome
+from wavestack.station.results import TruthErrors
+from wavestack.station.shack_hartmann import SlopeOutcome, coefficient_errors
+
+logger = logging.getLogger(__name__)
+
+
+def _frame_truth(bench: SimulatedInterferometer | SimulatedShackHartmann, frame: Frame) -> object | None:
+    try:
+        return bench.camera.truth(frame.frame_id)
+    except KeyError:
+        return None
+
+
+@dataclass(eq=False)
+class InterferometerTruthCheck:
+    """Truth errors of an interferometer's fits, in the fitted subspace over the fitted aperture.
+
+    Parameters
+    ----------
+    bench : SimulatedInterferometer
+    fit_decimation : int
+        The processor fits every n-th pixel in each direction; the truth map is fitted alike.
+    """
+
+    bench: SimulatedInterferometer
+    fit_decimation: int
+    _key: tuple[int, int] | None = field(default=None, init=False)  # (fitter, aperture revision) of the line
+    _line: tuple[NDArray, NDArray] = field(default=(np.zeros(0), np.zeros(0)), init=False)
+
+    def capture(self, frame: Frame) -> object | None:
+        return _frame_truth(self.bench, frame)
+
+    def compare(self, truth: object | None, outcome: object) -> TruthErrors | None:
+        """RMS of the true wavefront and of measured minus true (None without a valid fit or a truth)."""
+        if not isinstance(truth, FrameTruth) or not isinstance(outcome, InterferometerOutcome) or not outcome.valid:
+            return None
+        if outcome.choice is None or outcome.fit is None:
+            return TruthErrors(None, None)
+        if truth.source.aperture_revision != truth.aperture_revision:
+            return TruthErrors(None, None)  # the optic's aperture changed after this frame: its truth is gone
+        try:
+            at_zero, per_second = self._true_coefficients(truth, outcome.choice)
+        except InvalidFrame as error:  # the optic's aperture changed within the set: nothing to compare
+            logger.debug("no truth comparison: %s", error)
+            return TruthErrors(None, None)
+        fitter = outcome.choice.fitter
+        true_coefficients = at_zero + truth.time_s * per_second
+        # RMS over the fitted samples from the orthonormal form (no pass over the operator)
+        return TruthErrors(fitter.surface_rms(true_coefficients),
+                           fitter.surface_rms(outcome.fit.coefficients - true_coefficients))
+
+    def _true_coefficients(self, truth: FrameTruth, choice: FitterChoice) -> tuple[NDArray, NDArray]:
+        """The simulator's true coefficients in this fitter's basis, as ``a + t b``.
+
+        The simulated optic drifts linearly in time and the fit is linear in the map, so the true
+        coefficients at any frame time follow from two fits per fitter and aperture revision (at
+        t = 0 and t = 1 s) instead of one fit of a freshly rendered 8 MB map per result.
+        """
+        key = (id(choice.fitter), truth.aperture_revision)
+        if self._key != key:
+            start = self._fit(truth.source.truth(0.0).wavefront_waves, choice)
+            later = self._fit(truth.source.truth(1.0).wavefront_waves, choice)
+            self._key, self._line = key, (start, later - start)
+        return self._line
+
+    def _fit(self, waves: NDArray[np.float64], choice: FitterChoice) -> NDArray[np.float64]:
+        step = self.fit_decimation
+        return choice.fitter.fit(np.asarray(waves)[::step, ::step], nan_policy="omit").coefficients
+
+
+@dataclass(eq=False)
+class ShackHartmannTruthCheck:
+    """Truth errors of a Shack-Hartmann reconstruction, from the coefficients.
+
+    Both in the unit-RMS circle basis over the pupil disk, Noll 4 onwards
+    (:func:`~wavestack.station.shack_hartmann.coefficient_errors`).
+    """
+
+    bench: SimulatedShackHartmann
+
+    def capture(self, frame: Frame) -> object | None:
+        return _frame_truth(self.bench, frame)
+
+    def compare(self, truth: object | None, outcome: object) -> TruthErrors | None:
+        if not isinstance(truth, SpotTruth) or not isinstance(outcome, SlopeOutcome) or not outcome.valid:
+            return None
+        if outcome.coefficients_waves is None:
+            return TruthErrors(None, None)
+        return TruthErrors(*coefficient_errors(outcome.coefficients_waves, truth.coefficients_waves))
