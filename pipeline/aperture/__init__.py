@@ -2,15 +2,8 @@
 
 from __future__ import annotations
 
-from .detect import (
-    ApertureChange,
-    ApertureTracker,
-    DetectedAperture,
-    DetectionSettings,
-    aperture_iou,
-    compare_apertures,
-    detect_aperture,
-)
+from .compare import ApertureChange, ApertureTracker, aperture_iou, compare_apertures
+from .detect import DetectedAperture, DetectionSettings, detect_aperture
 from .region import Aperture, EmptyAperture, Topology, UnsupportedAperture
 from .watch import ApertureWatch, WatchVerdict
 

@@ -1,4 +1,4 @@
-"""Find the valid aperture in a modulation (or intensity) map, and track it from frame to frame.
+"""Find the valid aperture in a modulation (or intensity) map.
 
 The mirror shows up in a modulation map as a bright region; around it there is a dim speckled
 halo and inside it small dark dropouts (dust, speckle) and possibly a real central obscuration.
@@ -17,8 +17,7 @@ halo and inside it small dark dropouts (dust, speckle) and possibly a real centr
 The aperture is the geometric pupil, not the per-pixel validity of this one map: NaN pixels
 and dark dropouts inside the pupil are filled when they are small enough.
 
-:func:`aperture_iou` compares two apertures and :class:`ApertureTracker` decides from it
-whether a fitter built for an earlier aperture can be reused.
+Comparing and tracking apertures from frame to frame is :mod:`wavestack.pipeline.aperture.compare`.
 
 References
 ----------
@@ -32,34 +31,20 @@ References
 from __future__ import annotations
 
 import logging
-import math
-import numbers
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._checks import int_at_least, is_finite_real, real_at_least
 from .region import Aperture, EmptyAperture
 
-__all__ = [
-    "ApertureChange",
-    "ApertureTracker",
-    "DetectedAperture",
-    "DetectionSettings",
-    "aperture_iou",
-    "detect_aperture",
-]
+__all__ = ["DetectedAperture", "DetectionSettings", "detect_aperture"]
 
 logger = logging.getLogger(__name__)
 
 _KEEP_CHOICES = ("largest", "all")
-
-
-def _check_int(name: str, value: object, minimum: int) -> None:
-    """Raise ValueError unless ``value`` is an integer (not a bool) >= ``minimum``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
-        raise ValueError(f"{name} is {value!r}; expected an integer >= {minimum}")
 
 
 @dataclass(frozen=True)
@@ -99,19 +84,15 @@ class DetectionSettings:
     min_component_px: int = 500
 
     def __post_init__(self) -> None:
-        if self.threshold is not None and (
-            isinstance(self.threshold, bool)
-            or not isinstance(self.threshold, numbers.Real)
-            or not math.isfinite(self.threshold)
-        ):
+        if self.threshold is not None and not is_finite_real(self.threshold):
             raise ValueError(
                 f"threshold is {self.threshold!r}; expected None (Otsu) or a finite real "
                 "number in map units"
             )
-        _check_int("open_radius_px", self.open_radius_px, 0)
-        _check_int("close_radius_px", self.close_radius_px, 0)
-        _check_int("fill_dropouts_below_px", self.fill_dropouts_below_px, 0)
-        _check_int("min_component_px", self.min_component_px, 1)
+        int_at_least(self.open_radius_px, "open_radius_px", 0, voice="is")
+        int_at_least(self.close_radius_px, "close_radius_px", 0, voice="is")
+        int_at_least(self.fill_dropouts_below_px, "fill_dropouts_below_px", 0, voice="is")
+        int_at_least(self.min_component_px, "min_component_px", 1, voice="is")
         if self.keep not in _KEEP_CHOICES:
             raise ValueError(f"keep is {self.keep!r}; expected 'largest' or 'all'")
 
@@ -136,26 +117,6 @@ class DetectedAperture:
     threshold: float
     filled_dropouts: int
     removed_components: int
-
-
-@dataclass(frozen=True)
-class ApertureChange:
-    """Verdict of :meth:`ApertureTracker.update`.
-
-    Attributes
-    ----------
-    changed : bool
-        True when a fitter built for the reference aperture must not be reused.
-    iou : float
-        Intersection over union with the reference aperture (0.0 when there is none or the
-        shapes differ).
-    reason : str
-        Human-readable explanation.
-    """
-
-    changed: bool
-    iou: float
-    reason: str
 
 
 def detect_aperture(
@@ -209,14 +170,7 @@ def detect_aperture(
         raise ValueError(
             f"settings is {type(settings).__name__}; expected a DetectionSettings instance"
         )
-    if (
-        isinstance(min_hole_area_px, bool)
-        or not isinstance(min_hole_area_px, numbers.Real)
-        or not 0.0 <= float(min_hole_area_px) < math.inf
-    ):
-        raise ValueError(
-            f"min_hole_area_px is {min_hole_area_px!r}; expected a finite number >= 0 (pixels)"
-        )
+    real_at_least(min_hole_area_px, "min_hole_area_px", 0.0, unit="pixels", voice="is")
     values = _validated_map(signal_map)
     lo, hi, has_nan = _finite_range(values)
     if settings.threshold is not None:
@@ -248,147 +202,6 @@ def detect_aperture(
     return DetectedAperture(aperture, threshold, filled, removed)
 
 
-def aperture_iou(a: Aperture | ArrayLike, b: Aperture | ArrayLike) -> float:
-    """Intersection over union (Jaccard index) of two apertures or masks.
-
-    Parameters
-    ----------
-    a, b : Aperture or array_like, shape (rows, cols)
-        Apertures, or masks (bool or finite real; non-zero = valid) of the same shape.
-
-    Returns
-    -------
-    float
-        ``|A & B| / |A | B|`` in [0, 1]: 1 for identical masks, 0 for disjoint ones.
-
-    Raises
-    ------
-    ValueError
-        If a mask is not a 2-D bool or finite real array, the shapes differ, or both masks are
-        empty (IoU undefined).
-
-    References
-    ----------
-    .. [1] P. Jaccard, "The distribution of the flora in the alpine zone", New Phytologist
-       11(2), 37-50 (1912).
-    """
-    mask_a = _as_mask("a", a)
-    mask_b = _as_mask("b", b)
-    if mask_a.shape != mask_b.shape:
-        raise ValueError(
-            f"a has shape {mask_a.shape} and b has shape {mask_b.shape}; expected equal shapes"
-        )
-    union = int(np.count_nonzero(mask_a | mask_b))
-    if union == 0:
-        raise ValueError("a and b are both empty; expected at least one valid pixel")
-    return int(np.count_nonzero(mask_a & mask_b)) / union
-
-
-def compare_apertures(reference: Aperture, aperture: Aperture, iou_threshold: float) -> ApertureChange:
-    """Is ``aperture`` the same aperture as ``reference`` for a fitter built on the latter?
-
-    Parameters
-    ----------
-    reference, aperture : Aperture
-    iou_threshold : float
-        Smallest intersection over union that counts as the same aperture, in (0, 1].
-
-    Returns
-    -------
-    ApertureChange
-        ``changed`` when the mask shapes differ, the topology or the number of components
-        differs, or the IoU is below ``iou_threshold``; ``reason`` says which.
-    """
-    if reference.shape != aperture.shape:
-        return ApertureChange(True, 0.0, f"mask shape changed from {reference.shape} to {aperture.shape}")
-    iou = aperture_iou(reference, aperture)
-    if (reference.topology, reference.components) != (aperture.topology, aperture.components):
-        return ApertureChange(
-            True, iou, f"topology changed from {reference.describe()!r} to {aperture.describe()!r}"
-        )
-    if iou < iou_threshold:
-        return ApertureChange(True, iou, f"IoU {iou:.4f} below threshold {iou_threshold:g}")
-    return ApertureChange(False, iou, f"IoU {iou:.4f} >= threshold {iou_threshold:g}")
-
-
-class ApertureTracker:
-    """Decide, frame after frame, whether a fitter built for an earlier aperture is reusable.
-
-    The tracker holds a reference aperture: the one the current fitter was built for. Each
-    :meth:`update` compares the new aperture with it; when the change is too large the new
-    aperture becomes the reference (build a new fitter). An unchanged verdict leaves the
-    reference alone, so a slow drift accumulates until it crosses the threshold. Not
-    thread-safe.
-
-    Parameters
-    ----------
-    iou_threshold : float, optional
-        Smallest intersection over union with the reference for which the aperture counts as
-        unchanged; must be in (0, 1]. Default 0.98.
-
-    Raises
-    ------
-    ValueError
-        If ``iou_threshold`` is not a real number in (0, 1].
-    """
-
-    def __init__(self, iou_threshold: float = 0.98) -> None:
-        if (
-            isinstance(iou_threshold, bool)
-            or not isinstance(iou_threshold, numbers.Real)
-            or not 0.0 < float(iou_threshold) <= 1.0
-        ):
-            raise ValueError(f"iou_threshold is {iou_threshold!r}; expected a number in (0, 1]")
-        self._iou_threshold = float(iou_threshold)
-        self._reference: Aperture | None = None
-
-    @property
-    def iou_threshold(self) -> float:
-        """Smallest IoU with the reference that counts as unchanged."""
-        return self._iou_threshold
-
-    @property
-    def reference(self) -> Aperture | None:
-        """The aperture the current fitter was built for (None before the first update)."""
-        return self._reference
-
-    def reset(self) -> None:
-        """Forget the reference; the next :meth:`update` reports a change."""
-        self._reference = None
-
-    def update(self, aperture: Aperture) -> ApertureChange:
-        """Compare a new aperture with the reference.
-
-        Parameters
-        ----------
-        aperture : Aperture
-            Aperture of the current frame.
-
-        Returns
-        -------
-        ApertureChange
-            ``changed`` is True on the first call (or after :meth:`reset`), when the mask
-            shape, the topology or the number of components differs, or when the IoU with the
-            reference is below ``iou_threshold``; the new aperture then becomes the
-            reference.
-
-        Raises
-        ------
-        ValueError
-            If ``aperture`` is not an :class:`Aperture`.
-        """
-        if not isinstance(aperture, Aperture):
-            raise ValueError(f"aperture is {type(aperture).__name__}; expected an Aperture")
-        reference = self._reference
-        if reference is None:
-            change = ApertureChange(True, 0.0, "no reference aperture yet")
-        else:
-            change = compare_apertures(reference, aperture, self._iou_threshold)
-        if change.changed:
-            self._reference = aperture
-        return change
-
-
 def _validated_map(signal_map: ArrayLike) -> NDArray[np.generic]:
     """Check the map and return it as an array (no copy when possible)."""
     expected = "expected a 2-D array of real numbers (NaN allowed) with rows, cols >= 1"
@@ -403,22 +216,6 @@ def _validated_map(signal_map: ArrayLike) -> NDArray[np.generic]:
     if values.dtype.kind == "b":
         return values.view(np.uint8)
     return values
-
-
-def _as_mask(name: str, value: Aperture | ArrayLike) -> NDArray[np.bool_]:
-    """The mask of an Aperture, or a checked 2-D array as booleans (non-zero = valid)."""
-    if isinstance(value, Aperture):
-        return value.mask
-    expected = "expected an Aperture or a 2-D array of booleans or finite real numbers"
-    try:
-        array = np.asarray(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} could not be converted to an array ({exc}); {expected}") from exc
-    if array.ndim != 2 or array.dtype.kind not in "biuf":
-        raise ValueError(f"{name} has shape {array.shape}, dtype {array.dtype}; {expected}")
-    if array.dtype.kind == "f" and not np.isfinite(array).all():
-        raise ValueError(f"{name} has NaN or infinite entries; {expected}")
-    return array != 0
 
 
 def _finite_range(values: NDArray[np.generic]) -> tuple[float, float, bool]:

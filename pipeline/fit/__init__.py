@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from .build import available_methods, build_fitter
 from .conditioning import gram_condition, noise_gain, normalised_gram
-from .fitter import FitBasis, FitResult, Fitter, FitterDiagnostics, InvalidFrame, Pupil
+from .fitter import Fitter
 from .methods import (
     MAPPED_METHODS,
     METHODS,
@@ -15,6 +15,7 @@ from .methods import (
 )
 from .normal_equations import IllConditionedBasis
 from .physical_terms import PhysicalTerms, physical_term_names, remove_physical_terms
+from .results import FitBasis, FitResult, FitterDiagnostics, InvalidFrame, Pupil
 from .store import FitterStore, fitter_key, load_fitter, save_fitter
 
 __all__ = [

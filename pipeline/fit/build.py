@@ -22,21 +22,23 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg
 from numpy.typing import DTypeLike, NDArray
 
-from typing import TYPE_CHECKING
-
+from .._checks import is_integer, one_of
 from ..aperture import Aperture, UnsupportedAperture
+from ..zernike import default_normalisation, mode_list, normalisation_factor
 from .conditioning import gram_condition, noise_gain, normalised_gram
-from .fitter import FitBasis, Fitter, FitterDiagnostics, Pupil
+from .fitter import Fitter
 from .methods import METHODS, MappingOptions, Samples, method_columns
 from .normal_equations import NormalEquations
 from .orthonormal import factor_quality, orthonormalise
 from .physical_terms import physical_term_basis, physical_term_names
-from ..zernike import default_normalisation, mode_list, normalisation_factor
+from .results import FitBasis, FitterDiagnostics, Pupil
 
 if TYPE_CHECKING:
     from ..mapping import CanonicalMap
@@ -114,12 +116,10 @@ def _samples_of(aperture: Aperture, pupil: Pupil, user_pupil: bool) -> Samples:
 def _check_arguments(
     method: str, modes: int, ordering: str, dtype: np.dtype, fallback: str | None
 ) -> None:
-    if method not in METHODS:
-        raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    if isinstance(modes, bool) or not isinstance(modes, (int, np.integer)) or modes < 1:
+    one_of(method, "method", METHODS, voice="expected")
+    if not is_integer(modes) or modes < 1:
         raise ValueError(f"modes: expected a positive integer, got {modes!r}")
-    if ordering not in _ORDERINGS:
-        raise ValueError(f"ordering: expected one of {', '.join(_ORDERINGS)}, got {ordering!r}")
+    one_of(ordering, "ordering", _ORDERINGS, voice="expected")
     if dtype not in _DTYPES:
         raise ValueError(f"dtype: expected float32 or float64, got {dtype}")
     if fallback not in _FALLBACKS:
@@ -255,26 +255,92 @@ def _build(
     samples = _samples_of(aperture, resolved_pupil, user_pupil=pupil is not None)
     timings = {"aperture": time.perf_counter() - started}
     mode_pairs = mode_list(ordering, modes)
-    annular = False
 
     tick = time.perf_counter()
     columns = method_columns(method, aperture, samples, mode_pairs, options)
     timings["basis"] = time.perf_counter() - tick
     if columns.mapping is not None:
         timings.update({f"map_{stage}": seconds for stage, seconds in columns.mapping.timings.items()})
-        annular = columns.mapping.r_in is not None
+    output_normalisation, scale = _output_scale(mode_pairs, normalisation, columns.mapping)
+
+    tick = time.perf_counter()
+    factors = _factorise(columns.values, method, scale, samples, remove, dtype)
+    timings["factorise"] = time.perf_counter() - tick
+    timings["total"] = time.perf_counter() - started
+
+    basis = _basis_of(method, ordering, output_normalisation, mode_pairs, resolved_pupil, columns.mapping)
+    diagnostics = FitterDiagnostics(
+        method=method,
+        topology=aperture.topology.value,
+        valid_pixels=int(samples.x.size),
+        excluded_outside_pupil=samples.excluded,
+        gram_condition=factors.kappa,
+        noise_gain=factors.gain,
+        timings=timings,
+        **_mapping_diagnostics(columns.mapping),
+    )
+    logger.info(
+        "built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
+        method, len(mode_pairs), samples.x.size, factors.kappa, timings["total"],
+    )
+    return Fitter(
+        aperture=aperture,
+        flat_index=samples.flat_index,
+        operator=factors.operator,
+        equations=factors.equations,
+        coefficient_transform=factors.coefficient_transform,
+        from_coefficients=factors.from_coefficients,
+        basis=basis,
+        diagnostics=diagnostics,
+        circle_transform=factors.circle_transform,
+        removal=remove,
+        removal_transform=factors.removal_transform,
+        mapping=columns.mapping,
+    )
+
+
+def _output_scale(
+    mode_pairs: list[tuple[int, int]], normalisation: str, mapping: CanonicalMap | None
+) -> tuple[str, NDArray[np.float64]]:
+    """The normalisation of the output coefficients, and each mode's factor from unit RMS to it."""
+    annular = mapping is not None and mapping.r_in is not None
     # Annular terms are unit RMS over the annulus; the edge normalisation is a circle notion.
     output_normalisation = "rms" if annular else normalisation
     scale = np.array(
         [normalisation_factor(n, m, "rms") / normalisation_factor(n, m, output_normalisation)
          for n, m in mode_pairs]
     )
+    return output_normalisation, scale
 
-    tick = time.perf_counter()
-    orthonormal, triangular = orthonormalise(columns.values, method)
+
+@dataclass(frozen=True)
+class _Factors:
+    """The stored operator, the normal equations and the coefficient transforms of a build."""
+
+    operator: NDArray[np.floating]
+    equations: NormalEquations
+    coefficient_transform: NDArray[np.float64]
+    from_coefficients: NDArray[np.float64]
+    circle_transform: NDArray[np.float64] | None
+    removal_transform: NDArray[np.float64] | None
+    kappa: float
+    gain: float
+
+
+def _factorise(
+    values: NDArray[np.float64],
+    method: str,
+    scale: NDArray[np.float64],
+    samples: Samples,
+    remove: str | None,
+    dtype: np.dtype,
+) -> _Factors:
+    """Orthonormalise the method's columns (and the removed terms') on the samples (step 3)."""
+    n_modes = len(scale)
+    orthonormal, triangular = orthonormalise(values, method)
     kappa, gain = factor_quality(triangular)
     to_basis = scale[:, None] * scipy.linalg.solve_triangular(
-        triangular, np.eye(len(mode_pairs)), lower=False
+        triangular, np.eye(n_modes), lower=False
     )  # orthonormal coefficients -> the basis' own coefficients, in the output normalisation
     removal_transform = None
     if remove is not None:
@@ -286,54 +352,44 @@ def _build(
         orthonormal = np.hstack([orthonormal, terms_orthonormal])
     operator = _stored_operator(orthonormal, dtype)
     equations = NormalEquations(
-        orthonormal.T @ orthonormal, orthonormal.sum(axis=0), len(mode_pairs), samples.x.size
+        orthonormal.T @ orthonormal, orthonormal.sum(axis=0), n_modes, samples.x.size
     )
     del orthonormal
     if method == "qr":
-        coefficient_transform, circle_transform = np.eye(len(mode_pairs)), to_basis
-        from_coefficients = np.eye(len(mode_pairs))
-        own_gram = normalised_gram(equations.gram[: len(mode_pairs), : len(mode_pairs)], samples.x.size)
+        coefficient_transform, circle_transform = np.eye(n_modes), to_basis
+        from_coefficients = np.eye(n_modes)
+        own_gram = normalised_gram(equations.gram[:n_modes, :n_modes], samples.x.size)
         kappa, gain = gram_condition(own_gram), noise_gain(own_gram)
     else:
         coefficient_transform, circle_transform = to_basis, None
         from_coefficients = triangular / scale[None, :]
-    timings["factorise"] = time.perf_counter() - tick
-    timings["total"] = time.perf_counter() - started
+    return _Factors(
+        operator=operator,
+        equations=equations,
+        coefficient_transform=coefficient_transform,
+        from_coefficients=from_coefficients,
+        circle_transform=circle_transform,
+        removal_transform=removal_transform,
+        kappa=kappa,
+        gain=gain,
+    )
 
-    basis = FitBasis(
+
+def _basis_of(
+    method: str,
+    ordering: str,
+    output_normalisation: str,
+    mode_pairs: list[tuple[int, int]],
+    pupil: Pupil,
+    mapping: CanonicalMap | None,
+) -> FitBasis:
+    """What the fitter's coefficients mean."""
+    return FitBasis(
         method=method,
         ordering=ordering,
         normalisation="aperture-rms" if method == "qr" else output_normalisation,
         modes=tuple(mode_pairs),
         first_index=0 if ordering == "ansi" else 1,
-        pupil=resolved_pupil,
-        annular_obscuration=columns.mapping.r_in if columns.mapping is not None else None,
-    )
-    diagnostics = FitterDiagnostics(
-        method=method,
-        topology=aperture.topology.value,
-        valid_pixels=int(samples.x.size),
-        excluded_outside_pupil=samples.excluded,
-        gram_condition=kappa,
-        noise_gain=gain,
-        timings=timings,
-        **_mapping_diagnostics(columns.mapping),
-    )
-    logger.info(
-        "built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
-        method, len(mode_pairs), samples.x.size, kappa, timings["total"],
-    )
-    return Fitter(
-        aperture=aperture,
-        flat_index=samples.flat_index,
-        operator=operator,
-        equations=equations,
-        coefficient_transform=coefficient_transform,
-        from_coefficients=from_coefficients,
-        basis=basis,
-        diagnostics=diagnostics,
-        circle_transform=circle_transform,
-        removal=remove,
-        removal_transform=removal_transform,
-        mapping=columns.mapping,
+        pupil=pupil,
+        annular_obscuration=mapping.r_in if mapping is not None else None,
     )

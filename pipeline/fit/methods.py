@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .._checks import int_at_least, one_of
 from ..aperture import Aperture
 from ..mapping import LAPLACIANS, CanonicalMap, conformal_map, csf_qcm_map
 from ..zernike import annular_zernike_basis, zernike_basis
@@ -67,12 +68,8 @@ class MappingOptions:
     angular_balance: bool = True
 
     def __post_init__(self) -> None:
-        if self.laplacian not in LAPLACIANS:
-            raise ValueError(
-                f"laplacian: expected one of {', '.join(LAPLACIANS)}, got {self.laplacian!r}"
-            )
-        if not isinstance(self.mesh_vertices, (int, np.integer)) or self.mesh_vertices < 100:
-            raise ValueError(f"mesh_vertices: expected an integer >= 100, got {self.mesh_vertices!r}")
+        one_of(self.laplacian, "laplacian", LAPLACIANS, voice="expected")
+        int_at_least(self.mesh_vertices, "mesh_vertices", 100, voice="expected")
 
 
 @dataclass(frozen=True)

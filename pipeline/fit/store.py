@@ -21,8 +21,9 @@ from numpy.typing import NDArray
 
 from ..aperture import Aperture
 from .build import build_fitter
-from .fitter import FitBasis, Fitter, FitterDiagnostics, Pupil
+from .fitter import Fitter
 from .normal_equations import NormalEquations
+from .results import FitBasis, FitterDiagnostics, Pupil
 
 logger = logging.getLogger(__name__)
 

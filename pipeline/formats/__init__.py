@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from .datx import DatxMap, read_datx
 from .images import FRAME_SUFFIXES, read_frame, read_frame_set
 from .maps import InputError, load_map, load_mask
-from .metropro import DatxMap, MetroProHeader, MetroProMap, read_datx, read_metropro_dat
+from .metropro import MetroProMap, read_metropro_dat
+from .metropro_header import MetroProHeader
 
 __all__ = [
     "DatxMap",

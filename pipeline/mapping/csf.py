@@ -73,7 +73,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.linalg import solveh_banded
+
+from .._checks import int_at_least, real_at_least
+from .csf_step import _area_centroid, _deficit, _edges, _implicit_step, _redistribute, _renormalise
+from .polygon_checks import _validate_points
 
 logger = logging.getLogger(__name__)
 
@@ -81,11 +84,9 @@ FloatArray = NDArray[np.float64]
 
 __all__ = ["CurveFlow", "curve_shortening_flow"]
 
-_MIN_VERTICES = 8
 _DEFAULT_TIME_STEP = 0.1  # dimensionless, in units of A0 / pi (see curve_shortening_flow)
 _DEFAULT_FRAME_COUNT = 20  # intervals between kept frames when keep_every is None
 _EQ2_EPSILON = 1e-12  # the epsilon of Eq. 2; E_circ >= (pi/K)^2/3 > 3e-10 for K <= 1e5
-_PAIR_CHUNK = 1 << 20  # candidate edge pairs tested at once by the self-intersection check
 
 
 @dataclass(frozen=True, eq=False)
@@ -229,13 +230,13 @@ def curve_shortening_flow(
     P1 semi-implicit scheme; Gage & Hamilton (1986) for convergence to a round point.
     """
     start = _validate_points(points)
-    tolerance = _check_real(tolerance, "tolerance", minimum=0.0, strict=False)
+    tolerance = real_at_least(tolerance, "tolerance", 0.0, strict=False, voice="expected")
     tau = _DEFAULT_TIME_STEP
     if time_step is not None:
-        tau = _check_real(time_step, "time_step", minimum=0.0, strict=True)
-    max_iterations = _check_int(max_iterations, "max_iterations", minimum=0)
+        tau = real_at_least(time_step, "time_step", 0.0, strict=True, voice="expected")
+    max_iterations = int_at_least(max_iterations, "max_iterations", 0, voice="expected")
     if keep_every is not None:
-        keep_every = _check_int(keep_every, "keep_every", minimum=1)
+        keep_every = int_at_least(keep_every, "keep_every", 1, voice="expected")
     redistribute = bool(redistribute)
 
     z = np.ascontiguousarray(start.T)  # internal (2, K) layout
@@ -292,102 +293,6 @@ def curve_shortening_flow(
 # operations run on contiguous rows; frames are handed out as (K, 2) copies.
 
 
-def _edges(z: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Edge vectors ``z_{i+1} - z_i`` (cyclic), shape (2, K), and their lengths, shape (K,)."""
-    edge = np.empty_like(z)
-    np.subtract(z[:, 1:], z[:, :-1], out=edge[:, :-1])
-    np.subtract(z[:, :1], z[:, -1:], out=edge[:, -1:])
-    return edge, np.sqrt(edge[0] * edge[0] + edge[1] * edge[1])
-
-
-def _implicit_step(z: FloatArray, length: FloatArray, dt: float) -> FloatArray:
-    """One step ``(M + dt S) z_new = M z`` of the P1 arc-length heat equation (Eq. 1).
-
-    ``length`` holds the current edge lengths.  The cyclic tridiagonal SPD matrix ``A`` is
-    written ``A = B + u u^T / gamma`` with ``gamma = -A_00`` and ``u = (gamma, 0, ..., 0,
-    A_{K-1,0})``, so that ``B`` is plain tridiagonal and SPD (``B = A + u u^T / |gamma|``);
-    Sherman-Morrison then gives ``A^{-1} r = y - w (v.y) / (1 + v.w)`` with ``B y = r``,
-    ``B w = u`` and ``v = u / gamma``.
-    """
-    count = len(length)
-    weight = dt / np.maximum(length, np.finfo(np.float64).tiny)  # dt * S edge weights
-    mass = np.empty(count)
-    np.add(length[1:], length[:-1], out=mass[1:])
-    mass[0] = length[0] + length[-1]
-    mass *= 0.5  # lumped mass (l_{i-1} + l_i) / 2 at vertex i
-    banded = np.empty((2, count))
-    banded[0, 0] = 0.0
-    np.negative(weight[:-1], out=banded[0, 1:])
-    diagonal = banded[1]
-    np.add(mass, weight, out=diagonal)
-    diagonal[1:] += weight[:-1]
-    diagonal[0] += weight[-1]
-    corner = -weight[-1]  # A[K-1, 0] = A[0, K-1]
-    gamma = -diagonal[0]
-    diagonal[0] -= gamma
-    diagonal[-1] -= corner * corner / gamma
-    rhs = np.zeros((count, 3))
-    rhs[:, 0] = mass * z[0]
-    rhs[:, 1] = mass * z[1]
-    rhs[0, 2] = gamma
-    rhs[-1, 2] = corner
-    solution = solveh_banded(banded, rhs, check_finite=False)
-    y = solution[:, :2].T
-    w = solution[:, 2]
-    v_dot_y = y[:, 0] + (corner / gamma) * y[:, -1]
-    v_dot_w = w[0] + (corner / gamma) * w[-1]
-    return y - np.outer(v_dot_y / (1.0 + v_dot_w), w)
-
-
-def _redistribute(z: FloatArray, edge: FloatArray, length: FloatArray) -> FloatArray:
-    """Resample the polygon at K points equally spaced in arc length, from vertex 0 on."""
-    count = len(length)
-    arc = np.empty(count + 1)
-    arc[0] = 0.0
-    np.cumsum(length, out=arc[1:])
-    target = arc[-1] * (np.arange(count) / count)
-    index = np.searchsorted(arc, target, side="right") - 1
-    np.clip(index, 0, count - 1, out=index)
-    fraction = (target - arc[index]) / np.maximum(length[index], np.finfo(np.float64).tiny)
-    np.clip(fraction, 0.0, 1.0, out=fraction)
-    return z[:, index] + fraction * edge[:, index]
-
-
-def _renormalise(z: FloatArray, area0: float, centroid0: FloatArray) -> FloatArray:
-    """Scale about the area centroid to the area ``area0``; move the centroid to ``centroid0``."""
-    area, centroid = _area_centroid(z)
-    ratio = area0 / area if area != 0.0 else math.nan
-    if not (math.isfinite(ratio) and ratio > 0.0) or not np.all(np.isfinite(z)):
-        raise FloatingPointError(
-            "curve_shortening_flow broke down: the enclosed area changed sign or became non-finite"
-        )
-    return centroid0[:, None] + math.sqrt(ratio) * (z - centroid[:, None])
-
-
-def _area_centroid(z: FloatArray) -> tuple[float, FloatArray]:
-    """Signed area (positive counter-clockwise) and area centroid, shape (2,), of a polygon.
-
-    Coordinates are taken relative to the vertex mean first, so that a polygon far from the
-    origin does not lose digits in the shoelace sums.
-    """
-    origin = z.mean(axis=1)
-    p = z - origin[:, None]
-    q = np.empty_like(p)
-    q[:, :-1] = p[:, 1:]
-    q[:, -1] = p[:, 0]
-    cross = p[0] * q[1] - q[0] * p[1]
-    area = 0.5 * float(cross.sum())
-    if area == 0.0:
-        return 0.0, origin
-    centroid = origin + ((p + q) @ cross) / (6.0 * area)
-    return area, centroid
-
-
-def _deficit(area: float, perimeter: float) -> float:
-    """Isoperimetric deficit ``E_circ = 1 - 4 pi |A| / P^2`` (0 only for a circle)."""
-    return 1.0 - 4.0 * math.pi * abs(area) / (perimeter * perimeter)
-
-
 class _FrameKeeper:
     """Collects the kept frames; by default about ``_DEFAULT_FRAME_COUNT`` evenly spaced ones.
 
@@ -424,135 +329,3 @@ class _FrameKeeper:
             nearest = np.abs(available[None, :] - wanted[:, None]).argmin(axis=1)
             chosen = sorted({int(available[n]) for n in nearest})
         return tuple(np.ascontiguousarray(kept[k].T) for k in chosen), tuple(chosen)
-
-
-# --------------------------------------------------------------------------- validation
-
-
-def _validate_points(points: ArrayLike) -> FloatArray:
-    """Return ``points`` as a fresh float64 ``(K, 2)`` array or raise ValueError."""
-    try:
-        x = np.array(points, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise ValueError(
-            f"points: expected a real (K, 2) array, got {type(points).__name__}"
-        ) from error
-    if x.ndim != 2 or x.shape[1] != 2:
-        raise ValueError(f"points: expected shape (K, 2), got {x.shape}")
-    if len(x) < _MIN_VERTICES:
-        raise ValueError(f"points: expected K >= {_MIN_VERTICES} vertices, got {len(x)}")
-    if not np.all(np.isfinite(x)):
-        raise ValueError("points: expected finite coordinates, found NaN or inf")
-    _, length = _edges(x.T)
-    scale = float(np.max(np.abs(x - x.mean(axis=0))))
-    if np.any(length <= 1e-12 * scale):
-        first = int(np.argmax(length <= 1e-12 * scale))
-        raise ValueError(
-            f"points: expected distinct consecutive vertices (no repeated closing point), "
-            f"vertices {first} and {(first + 1) % len(x)} coincide"
-        )
-    area, _ = _area_centroid(x.T)
-    perimeter = float(length.sum())
-    if abs(area) <= 1e-10 * perimeter * perimeter:
-        raise ValueError(f"points: expected a polygon enclosing an area, got area {area:.3g}")
-    crossing = _self_intersection(x)
-    if crossing is not None:
-        raise ValueError(
-            f"points: expected a simple (non-self-intersecting) polygon, edges {crossing[0]} "
-            f"and {crossing[1]} intersect"
-        )
-    return x
-
-
-def _self_intersection(x: FloatArray) -> tuple[int, int] | None:
-    """A pair of edges of the closed polygon that meet other than at a shared vertex, or None.
-
-    Sweep along the longer side of the bounding box (say x): edges sorted by their left end,
-    each tested against the edges whose x-range starts inside its own, then filtered by
-    y-range and decided by orientation signs (touching and collinear overlap count as
-    intersections).  Adjacent edges are checked
-    separately for folding back onto each other.  Typical cost O(K sqrt K); worst case (all
-    edges overlapping in x) O(K^2) in chunks of ``_PAIR_CHUNK`` pairs.
-    """
-    count = len(x)
-    start = x
-    end = np.roll(x, -1, axis=0)
-    edge = end - start
-    previous = np.roll(edge, 1, axis=0)
-    fold = (previous[:, 0] * edge[:, 1] - previous[:, 1] * edge[:, 0] == 0.0) & (
-        np.einsum("ij,ij->i", previous, edge) < 0.0
-    )
-    if np.any(fold):
-        i = int(np.argmax(fold))
-        return (i - 1) % count, i
-
-    sweep = int(np.argmax(np.ptp(x, axis=0)))  # along the longer side of the bounding box
-    other = 1 - sweep
-    lo = np.minimum(start, end)
-    hi = np.maximum(start, end)
-    order = np.argsort(lo[:, sweep], kind="stable")
-    sorted_lo = lo[order, sweep]
-    reach = np.searchsorted(sorted_lo, hi[order, sweep], side="right")
-    counts = np.maximum(reach - np.arange(1, count + 1), 0)
-    offsets = np.concatenate(([0], np.cumsum(counts)))
-    first_row = 0
-    while first_row < count:
-        budget = offsets[first_row] + _PAIR_CHUNK
-        last_row = int(np.searchsorted(offsets, budget, side="right")) - 1
-        last_row = min(max(last_row, first_row + 1), count)
-        rows = np.arange(first_row, last_row)
-        n_pairs = counts[rows]
-        rank_a = np.repeat(rows, n_pairs)
-        row_start = np.repeat(offsets[rows] - offsets[first_row], n_pairs)
-        local = np.arange(int(n_pairs.sum())) - row_start
-        rank_b = rank_a + 1 + local
-        a = order[rank_a]
-        b = order[rank_b]
-        gap = np.abs(a - b)
-        keep = (gap != 1) & (gap != count - 1)
-        keep &= (lo[a, other] <= hi[b, other]) & (lo[b, other] <= hi[a, other])
-        a, b = a[keep], b[keep]
-        hit = _segments_meet(start[a], end[a], start[b], end[b])
-        if np.any(hit):
-            k = int(np.argmax(hit))
-            first, second = sorted((int(a[k]), int(b[k])))
-            return first, second
-        first_row = last_row
-    return None
-
-
-def _segments_meet(
-    p1: FloatArray, p2: FloatArray, q1: FloatArray, q2: FloatArray
-) -> NDArray[np.bool_]:
-    """Whether closed segments ``p1p2`` and ``q1q2`` (with overlapping bounding boxes) meet."""
-
-    def orient(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
-        ab, ac = b - a, c - a
-        return np.sign(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])
-
-    o1, o2 = orient(p1, p2, q1), orient(p1, p2, q2)
-    o3, o4 = orient(q1, q2, p1), orient(q1, q2, p2)
-    # Bounding boxes overlap (checked by the caller), so the collinear case (all zero) is a hit.
-    return (o1 * o2 <= 0) & (o3 * o4 <= 0)
-
-
-def _check_real(value: object, name: str, *, minimum: float, strict: bool) -> float:
-    """Return ``value`` as a finite float above ``minimum`` or raise ValueError."""
-    real = (int, float, np.integer, np.floating)
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, real):
-        raise ValueError(f"{name}: expected a real number, got {value!r}")
-    number = float(value)
-    ok = math.isfinite(number) and (number > minimum if strict else number >= minimum)
-    if not ok:
-        relation = ">" if strict else ">="
-        raise ValueError(f"{name}: expected a finite number {relation} {minimum:g}, got {value!r}")
-    return number
-
-
-def _check_int(value: object, name: str, *, minimum: int) -> int:
-    """Return ``value`` as an int >= ``minimum`` or raise ValueError."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name}: expected an integer, got {value!r}")
-    if int(value) < minimum:
-        raise ValueError(f"{name}: expected an integer >= {minimum}, got {value!r}")
-    return int(value)

@@ -44,9 +44,10 @@ import time
 import numpy as np
 from numpy.typing import NDArray
 
-from .annulus_angle import HarmonicAngle, unwrap_loop
-from .angular_balance import balance_angles
+from .._checks import one_of
 from ..aperture import Aperture
+from .angular_balance import balance_angles
+from .annulus_angle import HarmonicAngle, unwrap_loop
 from .beltrami import MapQuality, map_quality
 from .canonical_map import CanonicalMap, align_rotation, point_inside_hole, vertex_areas
 from .csf import CurveFlow, curve_shortening_flow
@@ -64,11 +65,10 @@ def _frame_angles(frame: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _laplacian(mesh: TriMesh, laplacian: str):
-    if laplacian == "cotangent":
-        return cotangent_laplacian(mesh.vertices, mesh.triangles)
+    one_of(laplacian, "laplacian", LAPLACIANS, voice="expected")
     if laplacian == "graph":
         return graph_laplacian(mesh.triangles, mesh.n_vertices)
-    raise ValueError(f"laplacian: expected one of {', '.join(LAPLACIANS)}, got {laplacian!r}")
+    return cotangent_laplacian(mesh.vertices, mesh.triangles)
 
 
 def _disk_map(
@@ -153,8 +153,7 @@ def csf_qcm_map(
     timings: dict[str, float] = {}
     tick = time.perf_counter()
     aperture.require_supported()
-    if laplacian not in LAPLACIANS:
-        raise ValueError(f"laplacian: expected one of {', '.join(LAPLACIANS)}, got {laplacian!r}")
+    one_of(laplacian, "laplacian", LAPLACIANS, voice="expected")
     mesh = mesh if mesh is not None else mesh_aperture(aperture, target_vertices)
     timings["mesh"] = time.perf_counter() - tick
 

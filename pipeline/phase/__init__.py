@@ -18,14 +18,8 @@ from .psi import (
     pca_psi,
     phase_from_frames,
 )
-from .spatial_unwrap import (
-    SpatialParams,
-    TemporalUnwrapper,
-    UnwrapResult,
-    count_residues,
-    unwrap_spatial,
-    wrap_phase,
-)
+from .spatial_unwrap import SpatialParams, count_residues, unwrap_spatial, wrap_phase
+from .temporal_unwrap import TemporalUnwrapper, UnwrapResult
 from .units import (
     WavefrontUnits,
     nm_to_phase,

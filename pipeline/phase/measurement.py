@@ -2,7 +2,7 @@
 
 One place strings the signal path together, for a phase-shifted set or a single carrier frame:
 
-1. phase: temporal phase shifting (:mod:`wavestack.pipeline.phase.psi.algorithms`) or the Fourier carrier method
+1. phase: temporal phase shifting (:mod:`wavestack.pipeline.phase.psi`) or the Fourier carrier method
    (:mod:`wavestack.pipeline.phase.carrier`), with the modulation map alongside;
 2. aperture: detected from the modulation (:mod:`wavestack.pipeline.aperture.detect`), so the
    mirror is found inside its speckled halo; for a carrier frame from the local fringe contrast
@@ -24,8 +24,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ..aperture import Aperture
-from ..aperture import DetectionSettings, detect_aperture
+from ..aperture import Aperture, DetectionSettings, detect_aperture
 from .carrier import carrier_phase
 from .psi.algorithms import phase_from_frames
 from .spatial_unwrap import SpatialParams, unwrap_spatial

@@ -35,11 +35,12 @@ References
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from .._checks import is_finite_real, real_at_least, require_real_dtype
 
 __all__ = [
     "WavefrontUnits",
@@ -376,10 +377,7 @@ class WavefrontUnits:
 def _scaled(value: ArrayLike, name: str, scale: float) -> float | NDArray[np.float64]:
     """``value * scale`` as float64: a float for scalar input, else an array."""
     array = np.asarray(value)
-    if array.dtype == np.bool_ or not (
-        np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)
-    ):
-        raise ValueError(f"{name} must be real numeric, got dtype {array.dtype}")
+    require_real_dtype(array, name)
     result = np.multiply(array, scale, dtype=np.float64)
     if result.ndim == 0:
         return float(result)
@@ -387,22 +385,10 @@ def _scaled(value: ArrayLike, name: str, scale: float) -> float | NDArray[np.flo
 
 
 def _validated_wavelength(value: float) -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, numbers.Real)
-        or not math.isfinite(value)
-        or value <= 0.0
-    ):
-        raise ValueError(f"wavelength_nm must be a finite number > 0 (nm), got {value!r}")
-    return float(value)
+    return real_at_least(value, "wavelength_nm", 0.0, strict=True, unit="nm")
 
 
 def _validated_factor(value: float, name: str = "factor") -> float:
-    if (
-        isinstance(value, bool)
-        or not isinstance(value, numbers.Real)
-        or not math.isfinite(value)
-        or value == 0.0
-    ):
+    if not is_finite_real(value) or value == 0.0:
         raise ValueError(f"{name} must be a finite non-zero number, got {value!r}")
     return float(value)

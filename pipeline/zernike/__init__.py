@@ -11,25 +11,22 @@ from .conic_null import (
     null_spherical_coefficients,
     null_wavefront_waves,
 )
+from .conversion import convert_coefficients
 from .indices import (
-    Normalisation,
-    Ordering,
     ansi_to_nm,
-    convert_coefficients,
-    default_normalisation,
     first_index,
     fringe_to_nm,
     index_to_nm,
     mode_list,
-    mode_name,
     nm_to_ansi,
     nm_to_fringe,
     nm_to_index,
     nm_to_noll,
     noll_to_nm,
-    normalisation_factor,
-    validate_mode,
 )
+from .modes import Ordering, validate_mode
+from .names import mode_name
+from .normalisation import Normalisation, default_normalisation, normalisation_factor
 
 __all__ = [
     "ConicTest",

@@ -45,8 +45,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._checks import is_real
 from .circle import _angles, _assemble_gradient, _assemble_values, _modes, _points, _RadialParts
-from .indices import normalisation_factor, validate_mode
+from .modes import validate_mode
+from .normalisation import normalisation_factor
 
 FloatArray = NDArray[np.float64]
 
@@ -65,9 +67,7 @@ class _Recurrence:
 
 def _check_obscuration(obscuration: object) -> float:
     """Return the obscuration ratio as a float in ``[0, 1)`` or raise ValueError."""
-    if isinstance(obscuration, (bool, np.bool_)) or not isinstance(
-        obscuration, (int, float, np.integer, np.floating)
-    ):
+    if not is_real(obscuration):
         raise ValueError(f"obscuration must be a real number in [0, 1), got {obscuration!r}")
     value = float(obscuration)
     if not (math.isfinite(value) and 0.0 <= value < 1.0):

@@ -35,7 +35,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .indices import Normalisation, normalisation_factor, validate_mode
+from .modes import validate_mode
+from .normalisation import Normalisation, normalisation_factor
 
 FloatArray = NDArray[np.float64]
 

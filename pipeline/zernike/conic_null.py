@@ -17,7 +17,7 @@ measurement. It holds all orders of spherical aberration, not only the fourth-or
 ``W ~ -K h^4 / (4 R^3)`` of the usual approximation (the conic departs from the sphere by
 ``K h^4 / (8 R^3)`` towards C, shortening the double pass by twice that).
 
-wavestack's sign convention (:mod:`wavestack.pipeline.phase.psi.algorithms`) makes a positive wavefront a
+wavestack's sign convention (:mod:`wavestack.pipeline.phase.psi`) makes a positive wavefront a
 positive phase; which physical path that is depends on which arm the phase shifter lengthens.
 :func:`implied_conic_constant` therefore reports the K whose null matches the measured
 spherical term under that convention; a reversed phase-step direction would give -K.

@@ -1,11 +1,11 @@
 """The last step shared by every PSI method: (3, N) weights applied to the frames, and its result.
 
-Every algorithm of :mod:`wavestack.pipeline.phase.psi.algorithms` ends by applying a (3, N) matrix of weights to
-the N frames, giving (A, C, S) per pixel, then ``phi = atan2(S, C)`` and ``B = hypot(C, S)``
-(:func:`_demodulate`, one pass over the frames in blocks that stay in cache). The result is a
-:class:`PhaseResult`. "The module docstring" in the docstrings below is that of
-:mod:`wavestack.pipeline.phase.psi.algorithms`: the sign convention, the quality map and the fast path of the
-fixed-step formulas.
+Every algorithm of :mod:`wavestack.pipeline.phase.psi` ends by applying a (3, N) matrix of
+weights to the N frames, giving (A, C, S) per pixel, then ``phi = atan2(S, C)`` and ``B =
+hypot(C, S)`` (:func:`_demodulate`, one pass over the frames in blocks that stay in cache). The
+result is a :class:`PhaseResult`. "The module docstring" in the docstrings below is that of
+:mod:`wavestack.pipeline.phase.psi`: the sign convention, the quality map and the fast path of
+the fixed-step formulas.
 """
 
 from __future__ import annotations

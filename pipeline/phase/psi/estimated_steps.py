@@ -3,7 +3,7 @@
 Both work on a subsample of the (masked) pixels, return the estimated steps referred to frame 0
 and oriented by ``direction`` (:func:`_normalise_steps`), and demodulate the full frames once
 with them by least squares (:func:`_demodulate`). Sign convention: module docstring of
-:mod:`wavestack.pipeline.phase.psi.algorithms`.
+:mod:`wavestack.pipeline.phase.psi`.
 """
 
 from __future__ import annotations
@@ -11,13 +11,13 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Sequence
-from numbers import Real
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..._angles import wrap_angle
-from .demodulation import PhaseResult, _apply, _demodulate, _lsq_weights
+from ..._checks import int_at_least, is_finite_real
+from .demodulation import _apply, _demodulate, _lsq_weights, PhaseResult
 from .inputs import (
     _MIN_SAMPLE_PIXELS,
     _check_direction,
@@ -169,12 +169,9 @@ def advanced_iterative_psi(
     count = stack.shape[0]
     _require_count(stack, "at least 3", count >= 3)
     _check_direction(direction)
-    if not (isinstance(tolerance, Real) and not isinstance(tolerance, bool) and math.isfinite(tolerance)
-            and tolerance > 0):
+    if not (is_finite_real(tolerance) and tolerance > 0):
         raise ValueError(f"tolerance: expected a positive number of radians, got {tolerance!r}")
-    if (isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer))
-            or max_iterations < 1):
-        raise ValueError(f"max_iterations: expected an integer >= 1, got {max_iterations!r}")
+    int_at_least(max_iterations, "max_iterations", 1, voice="expected")
     if initial_steps is None:
         steps = _nominal_steps(count, direction)
     else:

@@ -5,7 +5,7 @@ A :class:`_Formula` holds the integer coefficients of ``C`` and ``S`` and the we
 forms ``C`` and ``S`` exactly in integers, block of rows by block of rows, and takes the float32
 phase and modulation (:func:`_fixed_step_maps`); background and quality are computed on first
 access. Other dtypes take the float64 weights path of :func:`_demodulate`. Accuracy and timing
-are in the module docstring of :mod:`wavestack.pipeline.phase.psi.algorithms`.
+are in the module docstring of :mod:`wavestack.pipeline.phase.psi`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .demodulation import PhaseResult, _demodulate, _FringeMaps, _readonly
+from .demodulation import _demodulate, _FringeMaps, _readonly, PhaseResult
 from .inputs import _frame_stack, _require_count
 
 _FAST_BLOCK_PIXELS = 1 << 17  # pixels per row block of the float32 fixed-step path (fewer Python calls)

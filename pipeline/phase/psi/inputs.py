@@ -1,8 +1,8 @@
 """Checked inputs of the PSI methods: the frame stack, frame counts, directions, steps and masks.
 
-Each helper turns one argument of the public functions of :mod:`wavestack.pipeline.phase.psi.algorithms` into the
-array the algorithms expect, or raises a ``ValueError`` naming the argument and what was
-expected. :func:`_nominal_steps` gives the default equal steps over one cycle.
+Each helper turns one argument of the public functions of :mod:`wavestack.pipeline.phase.psi`
+into the array the algorithms expect, or raises a ``ValueError`` naming the argument and what
+was expected. :func:`_nominal_steps` gives the default equal steps over one cycle.
 """
 
 from __future__ import annotations

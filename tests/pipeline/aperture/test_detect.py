@@ -19,12 +19,8 @@ import pytest
 from numpy.typing import NDArray
 
 from wavestack.pipeline.aperture.region import Aperture, EmptyAperture, Topology
-from wavestack.pipeline.aperture.detect import (
-    ApertureTracker,
-    DetectionSettings,
-    aperture_iou,
-    detect_aperture,
-)
+from wavestack.pipeline.aperture.compare import ApertureTracker, aperture_iou
+from wavestack.pipeline.aperture.detect import DetectionSettings, detect_aperture
 
 _DATA = Path("/work/shared/data/psi-mirror-654nm")
 _LOG = logging.getLogger(__name__)

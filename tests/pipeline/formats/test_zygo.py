@@ -1,9 +1,9 @@
-"""Tests for wavestack.pipeline.formats.metropro: MetroPro .dat on the real file, .datx on synthetic files.
+"""Tests for wavestack.pipeline.formats.metropro and .datx: MetroPro .dat on the real file, .datx on synthetic files.
 
 The real file is ``/work/shared/data/zygo-dat/valid_zygo_dat_file.dat`` (header format 1);
 corrupted and truncated variants are written to ``tmp_path``, never over the original.
 There is no real .datx file: the .datx tests write their own HDF5 files following the layout
-documented in :func:`wavestack.pipeline.formats.metropro.read_datx`.
+documented in :func:`wavestack.pipeline.formats.datx.read_datx`.
 """
 
 from __future__ import annotations
@@ -16,13 +16,8 @@ import numpy as np
 import pytest
 
 from wavestack.pipeline.formats.maps import InputError
-from wavestack.pipeline.formats.metropro import (
-    INVALID_PHASE,
-    DatxMap,
-    MetroProMap,
-    read_datx,
-    read_metropro_dat,
-)
+from wavestack.pipeline.formats.metropro import INVALID_PHASE, MetroProMap, read_metropro_dat
+from wavestack.pipeline.formats.datx import DatxMap, read_datx
 
 DAT = Path("/work/shared/data/zygo-dat/valid_zygo_dat_file.dat")
 HEADER = 834

@@ -25,7 +25,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from numpy.typing import NDArray
 
-from wavestack.pipeline.phase.carrier import CarrierResult, _crop_rho, carrier_phase
+from wavestack.pipeline.phase.carrier import CarrierResult, carrier_phase
+from wavestack.pipeline.phase.carrier_spectrum import _crop_rho
 from wavestack.pipeline.phase.psi.algorithms import four_step
 
 PSI = Path("/work/shared/data/psi-mirror-654nm")

@@ -24,14 +24,8 @@ from hypothesis.extra.numpy import arrays
 from numpy.typing import NDArray
 from wavestack.pipeline.phase import spatial_unwrap as unwrap_module
 from wavestack.pipeline.aperture.region import EmptyAperture
-from wavestack.pipeline.phase.spatial_unwrap import (
-    SpatialParams,
-    TemporalUnwrapper,
-    UnwrapResult,
-    count_residues,
-    unwrap_spatial,
-    wrap_phase,
-)
+from wavestack.pipeline.phase.spatial_unwrap import SpatialParams, count_residues, unwrap_spatial, wrap_phase
+from wavestack.pipeline.phase.temporal_unwrap import TemporalUnwrapper, UnwrapResult
 
 TWO_PI = 2.0 * math.pi
 RMS_TOL = 0.05  # rad; see the module docstring

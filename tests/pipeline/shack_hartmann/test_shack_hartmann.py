@@ -36,21 +36,12 @@ from scipy.special import erf
 from wavestack.pipeline.zernike.annular import annular_zernike_gradient
 from wavestack.pipeline.aperture.region import Aperture
 from wavestack.pipeline.mapping.qcm import csf_qcm_map
-from wavestack.pipeline.shack_hartmann.centroids import (
-    Centroider,
-    LensletGrid,
-    SpotMeasurement,
-    centroid_spots,
-    convert_slopes,
-    detect_grid,
-    slopes,
-    slopes_in_waves_per_radius,
-)
-from wavestack.pipeline.shack_hartmann.modal import (
-    ModalReconstructor,
-    SouthwellReconstructor,
-    southwell_reconstruct,
-)
+from wavestack.pipeline.shack_hartmann.centroids import Centroider, SpotMeasurement, centroid_spots
+from wavestack.pipeline.shack_hartmann.grid import LensletGrid
+from wavestack.pipeline.shack_hartmann.spot_slopes import convert_slopes, slopes, slopes_in_waves_per_radius
+from wavestack.pipeline.shack_hartmann.grid_detection import detect_grid
+from wavestack.pipeline.shack_hartmann.modal import ModalReconstructor
+from wavestack.pipeline.shack_hartmann.zonal import SouthwellReconstructor, southwell_reconstruct
 from wavestack.pipeline.zernike.circle import zernike_basis, zernike_gradient
 from wavestack.pipeline.zernike.indices import mode_list
 

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from wavestack.pipeline.zernike.circle import zernike_basis, zernike_gradient, zernike_radial
-from wavestack.pipeline.zernike.indices import mode_list, noll_to_nm, normalisation_factor
+from wavestack.pipeline.zernike.indices import mode_list, noll_to_nm
+from wavestack.pipeline.zernike.normalisation import normalisation_factor
 
 N_MAX = 20
 ALL_MODES = [(n, m) for n in range(N_MAX + 1) for m in range(-n, n + 1, 2)]

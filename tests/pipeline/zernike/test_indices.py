@@ -12,25 +12,26 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from wavestack.pipeline.zernike.circle import zernike_basis
-from wavestack.pipeline.zernike.indices import (
+from wavestack.pipeline.zernike.normalisation import (
     Normalisation,
-    Ordering,
-    ansi_to_nm,
-    convert_coefficients,
     default_normalisation,
+    normalisation_factor,
+)
+from wavestack.pipeline.zernike.modes import Ordering, validate_mode
+from wavestack.pipeline.zernike.indices import (
+    ansi_to_nm,
     first_index,
     fringe_to_nm,
     index_to_nm,
     mode_list,
-    mode_name,
     nm_to_ansi,
     nm_to_fringe,
     nm_to_index,
     nm_to_noll,
     noll_to_nm,
-    normalisation_factor,
-    validate_mode,
 )
+from wavestack.pipeline.zernike.conversion import convert_coefficients
+from wavestack.pipeline.zernike.names import mode_name
 
 ORDERINGS: tuple[Ordering, ...] = ("noll", "ansi", "fringe")
 NORMALISATIONS: tuple[Normalisation, ...] = ("rms", "edge")
