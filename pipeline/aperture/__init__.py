@@ -1,4 +1,6 @@
-"""Apertures: the valid region of a frame, its detection, comparison and tracking, and the per-frame watch."""
+"""Apertures: the valid region of a frame, its detection, comparison and tracking, and the per-frame
+watch.
+"""
 
 from __future__ import annotations
 

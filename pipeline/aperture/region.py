@@ -156,6 +156,19 @@ class Aperture:
             one row and one column, or ``min_hole_area_px`` is not a finite number >= 0.
         EmptyAperture
             If ``mask`` has no valid pixel.
+
+        Examples
+        --------
+        A disk of radius 30 px, then the same disk with a central hole:
+
+        >>> import numpy as np
+        >>> rows, cols = np.mgrid[:64, :64]
+        >>> r2 = (rows - 31.5) ** 2 + (cols - 31.5) ** 2
+        >>> aperture = Aperture.from_mask(r2 < 30**2)
+        >>> aperture.topology.name, aperture.valid_count
+        ('SIMPLY_CONNECTED', 2828)
+        >>> Aperture.from_mask((r2 < 30**2) & (r2 > 10**2)).describe()
+        'doubly connected: 1 component, 1 hole, 2512 valid pixels'
         """
         valid = _validated_mask(mask)
         threshold = _validated_min_hole_area(min_hole_area_px)

@@ -1,4 +1,6 @@
-"""Fitting: fit methods, building a fitter, the fitter and its results, the on-disk store, physical terms."""
+"""Fitting: fit methods, building a fitter, the fitter and its results, the on-disk store, physical
+terms.
+"""
 
 from __future__ import annotations
 

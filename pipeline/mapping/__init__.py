@@ -1,4 +1,6 @@
-"""The CSF-QCM mapping: aperture meshes, Laplacians, curve-shortening flow, conformal modulus, Beltrami quality, the QCM and conformal canonical maps."""
+"""The CSF-QCM mapping: aperture meshes, Laplacians, curve-shortening flow, conformal modulus,
+Beltrami quality, the QCM and conformal canonical maps.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +10,7 @@ from .beltrami import MapQuality, area_scales, beltrami_coefficients, map_qualit
 from .canonical_map import CanonicalMap, align_rotation, clamp_to_domain, point_inside_hole, vertex_areas
 from .conformal import conformal_map
 from .csf import CurveFlow, curve_shortening_flow
-from .laplacian import DirichletSolver, LAPLACIANS, cotangent_laplacian, graph_laplacian
+from .laplacian import LAPLACIANS, DirichletSolver, cotangent_laplacian, graph_laplacian
 from .mesh import TriMesh, mesh_aperture
 from .mesh_calculus import gradients, hat_gradients, least_squares_potential, rotate90, triangle_areas
 from .modulus import (

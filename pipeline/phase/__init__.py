@@ -1,4 +1,6 @@
-"""Phase: PSI and carrier demodulation, spatial and temporal unwrapping, the measured wavefront, and units."""
+"""Phase: PSI and carrier demodulation, spatial and temporal unwrapping, the measured wavefront, and
+units.
+"""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Single-frame phase from carrier (tilt) fringes: the Fourier-transform method.
 
 Sign convention (project-wide, as in :mod:`wavestack.pipeline.phase.psi`)
-------------------------------------------------------------------------------------
+-------------------------------------------------------------------------
 A frame with carrier fringes is modelled as
 
     I(x, y) = A + B cos(phi(x, y) + 2 pi (fx x + fy y)),

@@ -23,6 +23,13 @@ The surface factor depends on the test geometry:
 
 Values may be NaN (pixels outside an aperture); NaN propagates.
 
+This module is the one place for these conversions. A wavefront in waves becomes nanometres
+with :func:`waves_to_nm` (``waves * wavelength_nm``), a phase map in radians becomes waves with
+:func:`phase_to_waves` and nanometres with :func:`phase_to_nm`, and a wavefront becomes surface
+height with :func:`wavefront_to_surface`; :class:`WavefrontUnits` holds the wavelength and the
+surface factor of one setup. All are on the faces ``wavestack.pipeline.phase`` and
+``wavestack.pipeline``.
+
 References
 ----------
 .. [1] D. Malacara (ed.), *Optical Shop Testing*, 3rd ed. (Wiley, 2007), ch. 1-2 (surface
@@ -82,6 +89,11 @@ def phase_to_waves(phase: ArrayLike) -> float | NDArray[np.float64]:
     References
     ----------
     .. [1] D. Malacara (ed.), *Optical Shop Testing*, 3rd ed. (Wiley, 2007), ch. 1.
+
+    Examples
+    --------
+    >>> phase_to_waves(3.141592653589793)
+    0.5
     """
     return _scaled(phase, "phase", 1.0 / _TWO_PI)
 
@@ -134,6 +146,11 @@ def waves_to_nm(waves: ArrayLike, wavelength_nm: float) -> float | NDArray[np.fl
     References
     ----------
     .. [1] D. Malacara (ed.), *Optical Shop Testing*, 3rd ed. (Wiley, 2007), ch. 1.
+
+    Examples
+    --------
+    >>> waves_to_nm(0.5, 632.8)
+    316.4
     """
     return _scaled(waves, "waves", _validated_wavelength(wavelength_nm))
 

@@ -42,9 +42,6 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 
-# --------------------------------------------------------------------------- grid detection
-
-
 # --------------------------------------------------------------------------- centroiding
 
 
@@ -346,6 +343,3 @@ def _gather_rows_cols(
     """``out[a, j, b] = image[rows[a], col_starts[j] + b]``: one gather of W-pixel runs."""
     runs = np.lib.stride_tricks.sliding_window_view(image, width, axis=1)
     return runs[rows[:, None], col_starts[None, :]]
-
-
-# --------------------------------------------------------------------------- input checks

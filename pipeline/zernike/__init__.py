@@ -1,4 +1,6 @@
-"""Zernike polynomials: index conventions and normalisations, the circle and annular bases, the conic null."""
+"""Zernike polynomials: index conventions and normalisations, the circle and annular bases, the
+conic null.
+"""
 
 from __future__ import annotations
 

@@ -59,6 +59,17 @@ def convert_coefficients(
     ----------
     Noll (1976) (unit RMS) and Wyant & Creath (1992), Table 2 (unit edge value) for
     the two normalisations.
+
+    Examples
+    --------
+    One unit-RMS wave of Noll defocus (j = 4) is sqrt(3) waves of edge-normalised Fringe
+    defocus (j = 4 as well), and sits at index 4 in ANSI order (from 0):
+
+    >>> import numpy as np
+    >>> np.round(convert_coefficients([0.0, 0.0, 0.0, 1.0], "noll", "fringe"), 6)
+    array([0.      , 0.      , 0.      , 1.732051])
+    >>> convert_coefficients([0.0, 0.0, 0.0, 1.0], "noll", "ansi")
+    array([0., 0., 0., 0., 1.])
     """
     values = np.asarray(coefficients)
     if values.ndim != 1:

@@ -75,6 +75,15 @@ def noll_to_nm(j: int) -> tuple[int, int]:
     References
     ----------
     Noll (1976), J. Opt. Soc. Am. 66, 207, Table I (ordering and parity rule).
+
+    Examples
+    --------
+    >>> noll_to_nm(4)  # defocus
+    (2, 0)
+    >>> noll_to_nm(11)  # primary spherical
+    (4, 0)
+    >>> nm_to_noll(*noll_to_nm(22))
+    22
     """
     j = _check_index(j, "noll")
     n = _triangle_row(j - 1)
@@ -329,6 +338,13 @@ def index_to_nm(j: int, ordering: Ordering) -> tuple[int, int]:
     References
     ----------
     See :func:`noll_to_nm`, :func:`ansi_to_nm`, :func:`fringe_to_nm`.
+
+    Examples
+    --------
+    Index 5 is an astigmatism term in every ordering, not always the same one:
+
+    >>> index_to_nm(5, "ansi"), index_to_nm(5, "noll"), index_to_nm(5, "fringe")
+    ((2, 2), (2, -2), (2, 2))
     """
     ordering_name = _check_ordering(ordering)
     if ordering_name == "noll":
@@ -399,6 +415,3 @@ def mode_list(ordering: Ordering, count: int) -> list[tuple[int, int]]:
     if count < 0:
         raise ValueError(f"count must be >= 0, got count={count}")
     return [index_to_nm(first + i, ordering) for i in range(count)]
-
-
-# --------------------------------------------------------------------------- conversion

@@ -54,6 +54,11 @@ def mode_name(n: int, m: int) -> str:
     References
     ----------
     Wyant & Creath (1992), Table 2; Noll (1976), Table I.
+
+    Examples
+    --------
+    >>> mode_name(4, 0)
+    'primary spherical'
     """
     n, m = validate_mode(n, m)
     return _MODE_NAMES.get((n, m), f"Z({n},{m})")
