@@ -160,3 +160,22 @@ def real_image(frame: ArrayLike, name: str) -> NDArray:
     ):
         raise ValueError(f"{name} must hold real numbers, got dtype {image.dtype}")
     return image
+
+
+def optional_mask(
+    mask: ArrayLike | None, shape: tuple[int, int], *, min_true: int, shape_of: str
+) -> NDArray[np.bool_] | None:
+    """A boolean mask of ``shape`` with at least ``min_true`` true pixels, or None.
+
+    ``shape_of`` names what the shape must match in the message (``"that of the frame"``).
+    """
+    if mask is None:
+        return None
+    array = np.asarray(mask)
+    if array.dtype != np.bool_:
+        raise ValueError(f"mask: expected a boolean array, got dtype {array.dtype}")
+    if array.shape != shape:
+        raise ValueError(f"mask: expected shape {shape} ({shape_of}), got {array.shape}")
+    if np.count_nonzero(array) < min_true:
+        raise ValueError(f"mask: expected at least {min_true} true pixels")
+    return array

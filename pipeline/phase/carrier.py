@@ -59,7 +59,7 @@ import scipy.fft
 import scipy.special
 from numpy.typing import ArrayLike, NDArray
 
-from .._checks import is_finite_real, one_of
+from .._checks import is_finite_real, one_of, optional_mask
 from .carrier_spectrum import _crop_half, _crop_rho, _find_carrier, _spectrum_block
 
 _WINDOWS = ("hann", "tukey", "rect")
@@ -110,16 +110,7 @@ def _check_frame(frame: ArrayLike) -> NDArray:
 
 
 def _check_mask(mask: ArrayLike | None, shape: tuple[int, int]) -> NDArray[np.bool_] | None:
-    if mask is None:
-        return None
-    array = np.asarray(mask)
-    if array.dtype != np.bool_:
-        raise ValueError(f"mask: expected a boolean array, got dtype {array.dtype}")
-    if array.shape != shape:
-        raise ValueError(f"mask: expected shape {shape} (that of the frame), got {array.shape}")
-    if np.count_nonzero(array) < _MIN_SIDE * _MIN_SIDE:
-        raise ValueError(f"mask: expected at least {_MIN_SIDE * _MIN_SIDE} true pixels")
-    return array
+    return optional_mask(mask, shape, min_true=_MIN_SIDE * _MIN_SIDE, shape_of="that of the frame")
 
 
 def _check_carrier(carrier: ArrayLike, shape: tuple[int, int]) -> tuple[float, float]:

@@ -108,3 +108,15 @@ def test_array_checks() -> None:
         _checks.real_image(np.zeros(3), "frame")
     with pytest.raises(ValueError, match="frame must hold real numbers"):
         _checks.real_image(np.zeros((2, 2), dtype=bool), "frame")
+
+
+def test_optional_mask() -> None:
+    assert _checks.optional_mask(None, (4, 4), min_true=1, shape_of="that of the frame") is None
+    mask = np.ones((4, 4), dtype=bool)
+    assert _checks.optional_mask(mask, (4, 4), min_true=16, shape_of="that of the frame") is not None
+    with pytest.raises(ValueError, match="mask: expected a boolean array, got dtype uint8"):
+        _checks.optional_mask(mask.astype(np.uint8), (4, 4), min_true=1, shape_of="x")
+    with pytest.raises(ValueError, match=r"mask: expected shape \(4, 5\) \(that of a frame\), got \(4, 4\)"):
+        _checks.optional_mask(mask, (4, 5), min_true=1, shape_of="that of a frame")
+    with pytest.raises(ValueError, match="mask: expected at least 17 true pixels"):
+        _checks.optional_mask(mask, (4, 4), min_true=17, shape_of="x")

@@ -12,6 +12,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..._checks import optional_mask
+
 _MIN_SAMPLE_PIXELS = 16  # fewer pixels than this cannot estimate steps reliably
 _DIRECTIONS = ("ccw", "cw")
 
@@ -82,13 +84,4 @@ def _nominal_steps(count: int, direction: str) -> NDArray[np.float64]:
 
 
 def _mask_array(mask: ArrayLike | None, shape: tuple[int, int]) -> NDArray[np.bool_] | None:
-    if mask is None:
-        return None
-    array = np.asarray(mask)
-    if array.dtype != np.bool_:
-        raise ValueError(f"mask: expected a boolean array, got dtype {array.dtype}")
-    if array.shape != shape:
-        raise ValueError(f"mask: expected shape {shape} (that of a frame), got {array.shape}")
-    if np.count_nonzero(array) < _MIN_SAMPLE_PIXELS:
-        raise ValueError(f"mask: expected at least {_MIN_SAMPLE_PIXELS} true pixels")
-    return array
+    return optional_mask(mask, shape, min_true=_MIN_SAMPLE_PIXELS, shape_of="that of a frame")
