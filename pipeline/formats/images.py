@@ -10,7 +10,7 @@ weights ``Y = 0.299 R + 0.587 G + 0.114 B`` [2]_ (the weights OpenCV's ``COLOR_B
 uses), rounded back to the stored integer type. For a grey picture stored as a colour JPEG
 this is the right choice and not an approximation: JPEG stores that very luma (its Y
 channel) and decoding to RGB adds rounding differences of a count or so between channels
-(the real interferograms in ``/work/shared/data/psi-mirror-654nm`` differ by up to 3 counts
+(the real interferograms in the shared ``psi-mirror-654nm`` data differ by up to 3 counts
 between channels in nearly every pixel, although they were meant to be grey), so the BT.601
 luma recovers the stored Y within one count. For a frame whose channels really differ
 (more than 2 % of full scale) a warning is logged, since mixing the channels of a colour

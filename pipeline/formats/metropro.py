@@ -9,7 +9,7 @@ the phase ("connected", ``cn_``) array:
 =============  ==========  ===========  ================================================
 header format  magic       header size  checked on
 =============  ==========  ===========  ================================================
-1              0x881B036F  834 bytes    the real file in ``/work/shared/data/zygo-dat``
+1              0x881B036F  834 bytes    the real file in the ``zygo-dat`` data
 2              0x881B0370  834 bytes    synthetic copies only
 3              0x881B0371  4096 bytes   synthetic copies only
 =============  ==========  ===========  ================================================

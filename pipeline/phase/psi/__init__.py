@@ -7,7 +7,7 @@ Frame ``k`` is modelled as
     I_k(x, y) = A(x, y) + B(x, y) cos(phi(x, y) + delta_k),
 
 where ``delta_k`` are the reference phase steps. *Counter-clockwise* (``direction="ccw"``,
-the default, and what the real data in ``/work/shared/data/psi-mirror-654nm`` use) means
+the default, and what the real data in the shared ``psi-mirror-654nm`` data use) means
 ``delta_k = +k * step``; *clockwise* (``"cw"``) means ``delta_k = -k * step``. Every function
 here returns ``phi`` in radians, wrapped to (-pi, pi], referenced to the first frame
 (``delta_0 = 0``). A positive ``phi`` is a positive wavefront: the wavefront in waves is

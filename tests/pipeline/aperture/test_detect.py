@@ -1,7 +1,7 @@
 """Tests for wavestack.pipeline.aperture.detect: aperture detection, IoU, aperture tracking.
 
 Synthetic maps check each step (threshold, speckle removal, dropout filling, obscurations,
-component selection); the real phase-shifting frames in /work/shared/data check that the mirror,
+component selection); the real phase-shifting frames in the shared data check that the mirror,
 not its speckled halo, is found.
 """
 
@@ -11,7 +11,6 @@ import dataclasses
 import logging
 import math
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -22,7 +21,9 @@ from wavestack.pipeline.aperture.region import Aperture, EmptyAperture, Topology
 from wavestack.pipeline.aperture.compare import ApertureTracker, aperture_iou
 from wavestack.pipeline.aperture.detect import DetectionSettings, detect_aperture
 
-_DATA = Path("/work/shared/data/psi-mirror-654nm")
+from shared_data import DATA
+
+_DATA = DATA / "psi-mirror-654nm"
 _LOG = logging.getLogger(__name__)
 
 

@@ -1,7 +1,7 @@
 """Tests for wavestack.pipeline.formats.images: frames from PNG/TIFF/JPEG/BMP files.
 
 Round trips use files written to ``tmp_path``; the real interferograms in
-``/work/shared/data/psi-mirror-654nm`` (800 x 600 RGB JPEGs meant to be grey) are read as
+``psi-mirror-654nm`` in the shared data (800 x 600 RGB JPEGs meant to be grey) are read as
 they are.
 """
 
@@ -17,7 +17,9 @@ import pytest
 from wavestack.pipeline.formats.images import read_frame, read_frame_set
 from wavestack.pipeline.formats.maps import InputError
 
-PSI = Path("/work/shared/data/psi-mirror-654nm")
+from shared_data import DATA
+
+PSI = DATA / "psi-mirror-654nm"
 
 
 def _write(path: Path, image: np.ndarray) -> Path:

@@ -1,6 +1,6 @@
 """Tests for wavestack.pipeline.formats.metropro and .datx: MetroPro .dat on the real file, .datx on synthetic files.
 
-The real file is ``/work/shared/data/zygo-dat/valid_zygo_dat_file.dat`` (header format 1);
+The real file is ``zygo-dat/valid_zygo_dat_file.dat`` in the shared data (header format 1);
 corrupted and truncated variants are written to ``tmp_path``, never over the original.
 There is no real .datx file: the .datx tests write their own HDF5 files following the layout
 documented in :func:`wavestack.pipeline.formats.datx.read_datx`.
@@ -19,7 +19,9 @@ from wavestack.pipeline.formats.maps import InputError
 from wavestack.pipeline.formats.metropro import INVALID_PHASE, MetroProMap, read_metropro_dat
 from wavestack.pipeline.formats.datx import DatxMap, read_datx
 
-DAT = Path("/work/shared/data/zygo-dat/valid_zygo_dat_file.dat")
+from shared_data import DATA
+
+DAT = DATA / "zygo-dat" / "valid_zygo_dat_file.dat"
 HEADER = 834
 INTENSITY_BYTES = 640 * 480 * 2
 PHASE_BYTES = 425 * 432 * 4

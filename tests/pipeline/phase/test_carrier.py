@@ -16,7 +16,6 @@ bound 1e-3 as specified.
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -29,7 +28,9 @@ from wavestack.pipeline.phase.carrier import CarrierResult, carrier_phase
 from wavestack.pipeline.phase.carrier_spectrum import _crop_rho
 from wavestack.pipeline.phase.psi.algorithms import four_step
 
-PSI = Path("/work/shared/data/psi-mirror-654nm")
+from shared_data import DATA
+
+PSI = DATA / "psi-mirror-654nm"
 SIZE = 512
 NO_CARRIER = "frame: no carrier fringes found; expected tilt fringes"
 

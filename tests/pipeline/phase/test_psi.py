@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import logging
 import pickle
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -34,7 +33,9 @@ from wavestack.pipeline.phase.psi.algorithms import (
     phase_from_frames,
 )
 
-PSI = Path("/work/shared/data/psi-mirror-654nm")
+from shared_data import DATA
+
+PSI = DATA / "psi-mirror-654nm"
 SIZE = 128
 UNKNOWN_STEPS = np.radians([0.0, 55.0, 130.0, 170.0, 250.0, 300.0])
 
