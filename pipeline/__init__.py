@@ -1,54 +1,111 @@
 """Arrays and geometry: apertures, Zernike bases, fitters. Nothing here knows about ports.
 
 The public face is ``from wavestack.pipeline import Aperture, build_fitter``; everything a user
-of the fitters needs is re-exported here.
+of the fitters needs is re-exported here. The names live in topic subpackages, each with its own
+face, stacked so that a lower topic never imports a higher one:
+
+* bottom: :mod:`~wavestack.pipeline.zernike` (index conventions, circle and annular bases, conic
+  null), :mod:`~wavestack.pipeline.aperture` (the aperture, detection, tracking, the per-frame
+  watch), :mod:`~wavestack.pipeline.formats` (maps, images, MetroPro .dat and .datx);
+* then :mod:`~wavestack.pipeline.phase` (PSI, carrier, unwrapping, the measured wavefront, units);
+* then :mod:`~wavestack.pipeline.mapping` (meshes, Laplacians, CSF, QCM and conformal maps);
+* then :mod:`~wavestack.pipeline.fit` (methods, building, the fitter, its store) and
+  :mod:`~wavestack.pipeline.shack_hartmann` (grid, centroids, slopes, reconstruction).
+
+Private pieces shared across topics live at this root (``_angles``, ``_checks``).
 """
 
-from .annular import annular_radial, annular_zernike_basis, annular_zernike_gradient
-from .aperture import Aperture, EmptyAperture, Topology, UnsupportedAperture
-from .aperture_detect import ApertureTracker, DetectionSettings, detect_aperture
-from .carrier import carrier_phase
-from .conic_null import ConicTest, implied_conic_constant
-from .build import available_methods, build_fitter
-from .conditioning import gram_condition, noise_gain
-from .fitter import FitBasis, FitResult, Fitter, FitterDiagnostics, InvalidFrame, Pupil
-from .fitter_store import FitterStore, load_fitter, save_fitter
-from .images import read_frame, read_frame_set
-from .io import InputError, load_map, load_mask
-from .measurement import MeasuredWavefront, wavefront_from_carrier, wavefront_from_phase_shifts
-from .normal_equations import IllConditionedBasis
-from .physical_terms import PhysicalTerms, remove_physical_terms
-from .psi import phase_from_frames
-from .unwrap import TemporalUnwrapper, unwrap_spatial
-from .zernike import zernike_basis, zernike_gradient, zernike_radial
-from .zygo import read_datx, read_metropro_dat
-from .zernike_index import (
+from __future__ import annotations
+
+from .aperture import (
+    Aperture,
+    ApertureTracker,
+    ApertureWatch,
+    DetectionSettings,
+    EmptyAperture,
+    Topology,
+    UnsupportedAperture,
+    compare_apertures,
+    detect_aperture,
+)
+from .fit import (
+    FitBasis,
+    FitResult,
+    Fitter,
+    FitterDiagnostics,
+    FitterStore,
+    IllConditionedBasis,
+    InvalidFrame,
+    MappingOptions,
+    PhysicalTerms,
+    Pupil,
+    Samples,
+    available_methods,
+    build_canonical_map,
+    build_fitter,
+    gram_condition,
+    load_fitter,
+    mapped_columns,
+    noise_gain,
+    remove_physical_terms,
+    save_fitter,
+)
+from .formats import InputError, load_map, load_mask, read_datx, read_frame, read_frame_set, read_metropro_dat
+from .mapping import csf_qcm_map
+from .phase import (
+    MeasuredWavefront,
+    SpatialParams,
+    TemporalUnwrapper,
+    WavefrontUnits,
+    carrier_phase,
+    four_step,
+    hariharan_five_step,
+    local_fringe_contrast,
+    nm_to_phase,
+    nm_to_waves,
+    phase_from_frames,
+    phase_to_nm,
+    phase_to_waves,
+    surface_to_wavefront,
+    unwrap_spatial,
+    wavefront_from_carrier,
+    wavefront_from_phase_shifts,
+    wavefront_to_surface,
+    waves_to_nm,
+    waves_to_phase,
+)
+from .shack_hartmann import (
+    Centroider,
+    LensletGrid,
+    ModalReconstructor,
+    SpotMeasurement,
+    convert_slopes,
+    slopes,
+)
+from .zernike import (
+    ConicTest,
+    annular_radial,
+    annular_zernike_basis,
+    annular_zernike_gradient,
     ansi_to_nm,
     convert_coefficients,
     default_normalisation,
     fringe_to_nm,
+    implied_conic_constant,
     index_to_nm,
     mode_list,
+    mode_name,
     nm_to_ansi,
     nm_to_fringe,
     nm_to_index,
     nm_to_noll,
     noll_to_nm,
     normalisation_factor,
+    null_wavefront_waves,
+    zernike_basis,
+    zernike_gradient,
+    zernike_radial,
 )
-
-from .zernike_index import mode_name
-from .methods import MappingOptions, Samples, mapped_columns
-from .methods import canonical_map as build_canonical_map
-from .shack_hartmann import Centroider, LensletGrid, SpotMeasurement, convert_slopes, slopes
-from .slope_reconstruction import ModalReconstructor
-from .aperture_detect import compare_apertures
-from .aperture_watch import ApertureWatch
-from .measurement import local_fringe_contrast
-from .unwrap import SpatialParams
-from .conic_null import null_wavefront_waves
-from .psi import four_step, hariharan_five_step
-from .qcm import csf_qcm_map
 
 __all__ = [
     "mode_name",
@@ -127,4 +184,13 @@ __all__ = [
     "zernike_basis",
     "zernike_gradient",
     "zernike_radial",
+    "phase_to_waves",
+    "waves_to_phase",
+    "waves_to_nm",
+    "nm_to_waves",
+    "phase_to_nm",
+    "nm_to_phase",
+    "wavefront_to_surface",
+    "surface_to_wavefront",
+    "WavefrontUnits",
 ]

@@ -1,0 +1,412 @@
+"""``build_fitter``: from an aperture to a ready :class:`~wavestack.pipeline.fit.fitter.Fitter`.
+
+The work done once per aperture, in order:
+
+1. the aperture and its pupil circle (default: the minimum enclosing circle of the valid
+   pixels), and the samples (valid pixels, in unit-disk coordinates of the pupil);
+2. the method's unit-RMS basis columns on the samples (:mod:`wavestack.pipeline.fit.methods`;
+   for ``csf-qcm`` and ``conformal`` this builds the mesh and the map);
+3. the columns orthonormalised on the samples, ``H = Q R`` by CholeskyQR2
+   (:mod:`wavestack.pipeline.fit.orthonormal`), and the physical piston/tilt/power columns likewise
+   when their removal is asked for;
+4. the operator ``[Q | Q_E]`` in the fit dtype, stored in the order that makes the per-frame
+   product fastest, the small normal equations, and the M x M maps from orthonormal
+   coefficients to the method's own.
+
+Nothing is ever decomposed at the size of the pixel matrix: the expensive part is a few
+N x M x M products.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import DTypeLike, NDArray
+
+from .._checks import is_integer, one_of
+from ..aperture import Aperture, UnsupportedAperture
+from ..zernike import default_normalisation, mode_list, normalisation_factor
+from .conditioning import gram_condition, noise_gain, normalised_gram
+from .fitter import Fitter
+from .methods import METHODS, MappingOptions, Samples, method_columns
+from .normal_equations import NormalEquations
+from .orthonormal import factor_quality, orthonormalise
+from .physical_terms import physical_term_basis, physical_term_names
+from .results import FitBasis, FitterDiagnostics, Pupil
+
+if TYPE_CHECKING:
+    from ..mapping import CanonicalMap
+
+logger = logging.getLogger(__name__)
+
+_ORDERINGS = ("noll", "ansi", "fringe")
+_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+_FALLBACKS = (None, "qr")
+# A user-given pupil may cut the aperture; samples farther out than this are left out.
+_PUPIL_TOLERANCE = 1e-9
+
+# Storage order of the operator, chosen for the one product a refit makes (``w @ A``), from
+# OpenBLAS gemv on this project's machine, N = 630,548 samples, one thread, median ms
+# (pixel-major A (N, M) / mode-major A^T (M, N) / numpy sum of A as the memory pass):
+#   M = 36:  float32 4.3 / 4.5 / 4.6,   float64  7.7 / 10.2 / 7.2
+#   M = 64:  float32 10.7 / 9.7 / 7.6,  float64 31.3 / 14.8 / 11.3
+#   M = 231: float32 58 / 37 / 37,      float64  112 / 68 / 46
+# Pixel-major wins only for few columns; past this count the operator is stored mode-major.
+_PIXEL_MAJOR_MAX_COLUMNS = 48
+
+
+def available_methods() -> tuple[str, ...]:
+    """Names accepted by ``build_fitter(method=...)``."""
+    return METHODS
+
+
+def _stored_operator(orthonormal: NDArray[np.float64], dtype: np.dtype) -> NDArray[np.floating]:
+    """The operator as an (N, M) array in the storage order that makes ``w @ A`` fastest.
+
+    Above ``_PIXEL_MAJOR_MAX_COLUMNS`` columns the data are stored as a C-ordered (M, N) array
+    and returned as its transposed view, which numpy hands to BLAS without a copy.
+    """
+    if orthonormal.shape[1] <= _PIXEL_MAJOR_MAX_COLUMNS:
+        return np.ascontiguousarray(orthonormal, dtype=dtype)
+    return np.ascontiguousarray(orthonormal.T, dtype=dtype).T
+
+
+def _aperture_of(aperture_or_mask: Aperture | NDArray) -> Aperture:
+    if isinstance(aperture_or_mask, Aperture):
+        return aperture_or_mask
+    return Aperture.from_mask(np.asarray(aperture_or_mask))
+
+
+def _pupil_of(aperture: Aperture, pupil: Pupil | tuple[float, float, float] | None) -> Pupil:
+    if pupil is None:
+        return Pupil(*aperture.enclosing_circle())
+    if not isinstance(pupil, Pupil):
+        values = tuple(pupil)
+        if len(values) != 3:
+            raise ValueError(f"pupil: expected (cx, cy, r) in pixels, got {pupil!r}")
+        pupil = Pupil(*(float(v) for v in values))
+    if not (np.isfinite([pupil.cx, pupil.cy, pupil.radius]).all() and pupil.radius > 0):
+        raise ValueError(f"pupil: expected finite centre and a radius > 0 pixels, got {pupil}")
+    return pupil
+
+
+def _samples_of(aperture: Aperture, pupil: Pupil, user_pupil: bool) -> Samples:
+    rows, cols = np.nonzero(aperture.mask)
+    x = (cols - pupil.cx) / pupil.radius
+    y = (pupil.cy - rows) / pupil.radius
+    excluded = 0
+    if user_pupil:
+        inside = x * x + y * y <= 1.0 + _PUPIL_TOLERANCE
+        excluded = int(inside.size - np.count_nonzero(inside))
+        if excluded:
+            logger.warning("%d valid pixels lie outside the given pupil and are left out", excluded)
+            rows, cols, x, y = rows[inside], cols[inside], x[inside], y[inside]
+    if rows.size == 0:
+        raise ValueError(f"pupil: no valid pixel of the aperture lies inside {pupil}")
+    flat = (rows * aperture.shape[1] + cols).astype(np.intp)
+    return Samples(flat, rows, cols, x, y, excluded)
+
+
+def _check_arguments(
+    method: str, modes: int, ordering: str, dtype: np.dtype, fallback: str | None
+) -> None:
+    one_of(method, "method", METHODS, voice="expected")
+    if not is_integer(modes) or modes < 1:
+        raise ValueError(f"modes: expected a positive integer, got {modes!r}")
+    one_of(ordering, "ordering", _ORDERINGS, voice="expected")
+    if dtype not in _DTYPES:
+        raise ValueError(f"dtype: expected float32 or float64, got {dtype}")
+    if fallback not in _FALLBACKS:
+        raise ValueError(f"fallback: expected None or 'qr', got {fallback!r}")
+
+
+def _mapping_diagnostics(mapping: CanonicalMap | None) -> dict[str, object]:
+    if mapping is None:
+        return {}
+    quality = mapping.quality
+    return {
+        "flips": quality.flips,
+        "max_beltrami": quality.max_beltrami,
+        "p95_beltrami": quality.p95_beltrami,
+        "area_scale_p5": quality.area_scale_p5,
+        "area_scale_p95": quality.area_scale_p95,
+        "r_in": mapping.r_in,
+        "csf_iterations": mapping.csf_iterations,
+        "mesh_vertices": mapping.mesh.n_vertices,
+    }
+
+
+def build_fitter(
+    aperture_or_mask: Aperture | NDArray,
+    method: str = "circle",
+    modes: int = 36,
+    ordering: str = "noll",
+    pupil: Pupil | tuple[float, float, float] | None = None,
+    dtype: DTypeLike = np.float32,
+    *,
+    normalisation: str | None = None,
+    remove: str | None = None,
+    laplacian: str = "cotangent",
+    mesh_vertices: int = 15000,
+    angular_balance: bool = True,
+    fallback: str | None = None,
+) -> Fitter:
+    """Precompute everything needed to refit frames on one aperture.
+
+    Parameters
+    ----------
+    aperture_or_mask : Aperture or ndarray of shape (rows, cols)
+        The aperture, or a mask (non-zero = valid) to build it from.
+    method : {"circle", "qr", "conformal", "csf-qcm"}
+        ``circle``: Zernike polynomials over the pupil circle. ``qr``: the same modes
+        orthonormalised over the samples; ``FitResult.circle_coefficients`` converts back.
+        ``csf-qcm``: Zernike (or annular Zernike) polynomials on the CSF-QCM map of the aperture
+        onto the unit disk (or a concentric annulus). ``conformal``: the same on a discrete
+        conformal map (the baseline).
+    modes : int
+        Number of modes: the first ``modes`` terms of ``ordering`` (36 Noll terms reach n = 7;
+        231 reach n = 20).
+    ordering : {"noll", "ansi", "fringe"}
+        Index convention (see :mod:`wavestack.pipeline.zernike.indices`).
+    pupil : Pupil or (cx, cy, r), optional
+        The unit disk in pixels, cx a column and cy a row coordinate. Default: the aperture's
+        minimum enclosing circle through the outermost valid pixel centres. Valid pixels outside
+        a given pupil are left out of the fit (counted in ``diagnostics``). For mapped methods
+        it only normalises the physical piston/tilt/power terms.
+    dtype : {numpy.float32, numpy.float64}
+        Type of the stored operator and the per-frame product; the factorisations are float64.
+    normalisation : {"rms", "edge"}, optional
+        Output normalisation of Zernike coefficients; default: the ordering's own (unit RMS for
+        Noll and ANSI, unit edge value for Fringe). Annular terms are always unit RMS.
+    remove : {"ptt", "pttp"}, optional
+        Fit and remove piston and tilt (and power) in physical coordinates before the fit; they
+        are reported in ``FitResult.removed``.
+    laplacian : {"cotangent", "graph"}
+        Interior weights of the ``csf-qcm`` map (``graph`` is the paper-faithful mode).
+    mesh_vertices : int
+        Approximate vertex count of the aperture mesh of the mapped methods.
+    angular_balance : bool
+        ``csf-qcm`` only: balance the map's area over angle (our addition to the paper's
+        method; False gives the paper's method alone).
+    fallback : {None, "qr"}
+        With "qr", an aperture a mapped method cannot handle (several components or holes)
+        gives a ``qr`` fitter whose ``diagnostics.fallback`` says why, instead of an error.
+
+    Returns
+    -------
+    Fitter
+
+    Raises
+    ------
+    ValueError
+        For an invalid argument (the message names it), an empty aperture, or a pupil that
+        misses the aperture.
+    UnsupportedAperture
+        For a mapped method on an aperture with several components or holes, without fallback.
+    IllConditionedBasis
+        If the modes are linearly dependent on the samples.
+
+    Examples
+    --------
+    A fitter for a 64 x 64 disk, then the fit of a map made of a quarter wave of defocus
+    (Noll j = 4, unit RMS): the coefficient comes back.
+
+    >>> import numpy as np
+    >>> rows, cols = np.mgrid[:64, :64]
+    >>> mask = (rows - 31.5) ** 2 + (cols - 31.5) ** 2 < 30**2
+    >>> fitter = build_fitter(mask, modes=15, dtype=np.float64)
+    >>> fitter.basis.modes[3]
+    (2, 0)
+    >>> truth = np.zeros(15)
+    >>> truth[3] = 0.25
+    >>> result = fitter.fit(fitter.surface(truth))
+    >>> np.round(result.coefficients[:6], 6) + 0.0
+    array([0.  , 0.  , 0.  , 0.25, 0.  , 0.  ])
+    """
+    dtype = np.dtype(dtype)
+    _check_arguments(method, modes, ordering, dtype, fallback)
+    normalisation = normalisation or default_normalisation(ordering)
+    if normalisation not in ("rms", "edge"):
+        raise ValueError(f"normalisation: expected 'rms' or 'edge', got {normalisation!r}")
+    if remove is not None:
+        physical_term_names(remove)
+    options = MappingOptions(
+        laplacian=laplacian, mesh_vertices=mesh_vertices, angular_balance=bool(angular_balance)
+    )
+    settings = dict(
+        modes=int(modes), ordering=ordering, pupil=pupil, dtype=dtype,
+        normalisation=normalisation, remove=remove, options=options,
+    )
+    aperture = _aperture_of(aperture_or_mask)
+    try:
+        return _build(aperture, method, **settings)
+    except UnsupportedAperture as error:
+        if fallback is None or method not in ("conformal", "csf-qcm"):
+            raise
+        logger.warning("%s cannot map this aperture (%s); falling back to qr", method, error)
+        fitter = _build(aperture, "qr", **settings)
+        fitter.diagnostics = dataclasses.replace(fitter.diagnostics, fallback=f"{method}: {error}")
+        return fitter
+
+
+def _build(
+    aperture: Aperture,
+    method: str,
+    *,
+    modes: int,
+    ordering: str,
+    pupil: Pupil | tuple[float, float, float] | None,
+    dtype: np.dtype,
+    normalisation: str,
+    remove: str | None,
+    options: MappingOptions,
+) -> Fitter:
+    started = time.perf_counter()
+    resolved_pupil = _pupil_of(aperture, pupil)
+    samples = _samples_of(aperture, resolved_pupil, user_pupil=pupil is not None)
+    timings = {"aperture": time.perf_counter() - started}
+    mode_pairs = mode_list(ordering, modes)
+
+    tick = time.perf_counter()
+    columns = method_columns(method, aperture, samples, mode_pairs, options)
+    timings["basis"] = time.perf_counter() - tick
+    if columns.mapping is not None:
+        timings.update({f"map_{stage}": seconds for stage, seconds in columns.mapping.timings.items()})
+    output_normalisation, scale = _output_scale(mode_pairs, normalisation, columns.mapping)
+
+    tick = time.perf_counter()
+    factors = _factorise(columns.values, method, scale, samples, remove, dtype)
+    timings["factorise"] = time.perf_counter() - tick
+    timings["total"] = time.perf_counter() - started
+
+    basis = _basis_of(method, ordering, output_normalisation, mode_pairs, resolved_pupil, columns.mapping)
+    diagnostics = FitterDiagnostics(
+        method=method,
+        topology=aperture.topology.value,
+        valid_pixels=int(samples.x.size),
+        excluded_outside_pupil=samples.excluded,
+        gram_condition=factors.kappa,
+        noise_gain=factors.gain,
+        timings=timings,
+        **_mapping_diagnostics(columns.mapping),
+    )
+    logger.info(
+        "built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
+        method, len(mode_pairs), samples.x.size, factors.kappa, timings["total"],
+    )
+    return Fitter(
+        aperture=aperture,
+        flat_index=samples.flat_index,
+        operator=factors.operator,
+        equations=factors.equations,
+        coefficient_transform=factors.coefficient_transform,
+        from_coefficients=factors.from_coefficients,
+        basis=basis,
+        diagnostics=diagnostics,
+        circle_transform=factors.circle_transform,
+        removal=remove,
+        removal_transform=factors.removal_transform,
+        mapping=columns.mapping,
+    )
+
+
+def _output_scale(
+    mode_pairs: list[tuple[int, int]], normalisation: str, mapping: CanonicalMap | None
+) -> tuple[str, NDArray[np.float64]]:
+    """The normalisation of the output coefficients, and each mode's factor from unit RMS to it."""
+    annular = mapping is not None and mapping.r_in is not None
+    # Annular terms are unit RMS over the annulus; the edge normalisation is a circle notion.
+    output_normalisation = "rms" if annular else normalisation
+    scale = np.array(
+        [normalisation_factor(n, m, "rms") / normalisation_factor(n, m, output_normalisation)
+         for n, m in mode_pairs]
+    )
+    return output_normalisation, scale
+
+
+@dataclass(frozen=True)
+class _Factors:
+    """The stored operator, the normal equations and the coefficient transforms of a build."""
+
+    operator: NDArray[np.floating]
+    equations: NormalEquations
+    coefficient_transform: NDArray[np.float64]
+    from_coefficients: NDArray[np.float64]
+    circle_transform: NDArray[np.float64] | None
+    removal_transform: NDArray[np.float64] | None
+    kappa: float
+    gain: float
+
+
+def _factorise(
+    values: NDArray[np.float64],
+    method: str,
+    scale: NDArray[np.float64],
+    samples: Samples,
+    remove: str | None,
+    dtype: np.dtype,
+) -> _Factors:
+    """Orthonormalise the method's columns (and the removed terms') on the samples (step 3)."""
+    n_modes = len(scale)
+    orthonormal, triangular = orthonormalise(values, method)
+    kappa, gain = factor_quality(triangular)
+    to_basis = scale[:, None] * scipy.linalg.solve_triangular(
+        triangular, np.eye(n_modes), lower=False
+    )  # orthonormal coefficients -> the basis' own coefficients, in the output normalisation
+    removal_transform = None
+    if remove is not None:
+        terms = physical_term_basis(samples.x, samples.y, remove)
+        terms_orthonormal, terms_triangular = orthonormalise(terms, f"remove={remove}")
+        removal_transform = scipy.linalg.solve_triangular(
+            terms_triangular, np.eye(terms.shape[1]), lower=False
+        )
+        orthonormal = np.hstack([orthonormal, terms_orthonormal])
+    operator = _stored_operator(orthonormal, dtype)
+    equations = NormalEquations(
+        orthonormal.T @ orthonormal, orthonormal.sum(axis=0), n_modes, samples.x.size
+    )
+    del orthonormal
+    if method == "qr":
+        coefficient_transform, circle_transform = np.eye(n_modes), to_basis
+        from_coefficients = np.eye(n_modes)
+        own_gram = normalised_gram(equations.gram[:n_modes, :n_modes], samples.x.size)
+        kappa, gain = gram_condition(own_gram), noise_gain(own_gram)
+    else:
+        coefficient_transform, circle_transform = to_basis, None
+        from_coefficients = triangular / scale[None, :]
+    return _Factors(
+        operator=operator,
+        equations=equations,
+        coefficient_transform=coefficient_transform,
+        from_coefficients=from_coefficients,
+        circle_transform=circle_transform,
+        removal_transform=removal_transform,
+        kappa=kappa,
+        gain=gain,
+    )
+
+
+def _basis_of(
+    method: str,
+    ordering: str,
+    output_normalisation: str,
+    mode_pairs: list[tuple[int, int]],
+    pupil: Pupil,
+    mapping: CanonicalMap | None,
+) -> FitBasis:
+    """What the fitter's coefficients mean."""
+    return FitBasis(
+        method=method,
+        ordering=ordering,
+        normalisation="aperture-rms" if method == "qr" else output_normalisation,
+        modes=tuple(mode_pairs),
+        first_index=0 if ordering == "ansi" else 1,
+        pupil=pupil,
+        annular_obscuration=mapping.r_in if mapping is not None else None,
+    )

@@ -1,0 +1,161 @@
+"""Reading camera frames (interferograms) from image files as 2-D arrays.
+
+Frames are read with OpenCV (``cv2.imread`` with ``IMREAD_UNCHANGED``) [1]_, which keeps the
+stored depth (8- or 16-bit integers, 32-bit float TIFF) and ignores EXIF orientation, so the
+array is the sensor's pixel grid as stored.
+
+Colour files are reduced to one channel. When the colour channels are identical the first
+one is taken as it is. Otherwise the frame is converted to luma with the ITU-R BT.601
+weights ``Y = 0.299 R + 0.587 G + 0.114 B`` [2]_ (the weights OpenCV's ``COLOR_BGR2GRAY``
+uses), rounded back to the stored integer type. For a grey picture stored as a colour JPEG
+this is the right choice and not an approximation: JPEG stores that very luma (its Y
+channel) and decoding to RGB adds rounding differences of a count or so between channels
+(the real interferograms in the shared ``psi-mirror-654nm`` data differ by up to 3 counts
+between channels in nearly every pixel, although they were meant to be grey), so the BT.601
+luma recovers the stored Y within one count. For a frame whose channels really differ
+(more than 2 % of full scale) a warning is logged, since mixing the channels of a colour
+camera is a choice the caller may want to know about. An alpha channel is dropped.
+
+References
+----------
+.. [1] OpenCV documentation, ``cv2.imread`` and ``ImreadModes`` (``IMREAD_UNCHANGED``).
+.. [2] ITU-R Recommendation BT.601-7, "Studio encoding parameters of digital television
+   for standard 4:3 and wide-screen 16:9 aspect ratios" (2011), luma equation.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from .maps import InputError
+
+__all__ = ["BT601_WEIGHTS_BGR", "FRAME_SUFFIXES", "read_frame", "read_frame_set"]
+
+logger = logging.getLogger(__name__)
+
+FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
+BT601_WEIGHTS_BGR = (0.114, 0.587, 0.299)  # luma weights in OpenCV's channel order B, G, R
+_COLOUR_WARNING_FRACTION = 0.02  # channel difference (fraction of full scale) that is logged
+
+
+def _full_scale(image: NDArray) -> float:
+    if np.issubdtype(image.dtype, np.integer):
+        return float(np.iinfo(image.dtype).max)
+    finite = image[np.isfinite(image)]
+    return float(np.ptp(finite)) if finite.size else 0.0
+
+
+def _to_gray(path: Path, image: NDArray) -> NDArray:
+    """Reduce an (rows, cols, channels) colour image to one channel (module notes)."""
+    channels = image.shape[2]
+    if channels == 1:
+        return image[:, :, 0]
+    if channels == 2:  # grey + alpha
+        return image[:, :, 0]
+    colour = image[:, :, :3]
+    first = colour[:, :, 0]
+    if np.array_equal(first, colour[:, :, 1]) and np.array_equal(first, colour[:, :, 2]):
+        return first.copy()
+    as_float = colour.astype(np.float64)
+    spread = float(np.nanmax(as_float.max(axis=2) - as_float.min(axis=2)))
+    coloured = spread > _COLOUR_WARNING_FRACTION * _full_scale(image)
+    logger.log(
+        logging.WARNING if coloured else logging.DEBUG,
+        "%s: colour channels differ by up to %g; converted to BT.601 luma", path, spread,
+    )
+    luma = as_float @ np.asarray(BT601_WEIGHTS_BGR)
+    if np.issubdtype(image.dtype, np.integer):
+        info = np.iinfo(image.dtype)
+        return np.clip(np.rint(luma), info.min, info.max).astype(image.dtype)
+    return luma.astype(image.dtype)
+
+
+def read_frame(path: str | Path) -> NDArray:
+    """Read one camera frame as a 2-D array.
+
+    Parameters
+    ----------
+    path : str or Path
+        A PNG, TIFF, JPEG or BMP file (suffixes in :data:`FRAME_SUFFIXES`), grey or colour,
+        8 or 16 bit, or 32-bit float TIFF.
+
+    Returns
+    -------
+    ndarray, shape (rows, cols)
+        The stored dtype: uint8, uint16 (or another integer type the file holds), float32
+        for a float TIFF. Colour files are reduced to one channel as the module notes say.
+
+    Raises
+    ------
+    InputError
+        If the file is missing, has another suffix, cannot be decoded as an image, or does
+        not hold a single 2-D frame (grey, grey + alpha, BGR or BGRA).
+
+    References
+    ----------
+    .. [1] OpenCV documentation, ``cv2.imread``.
+    .. [2] ITU-R Recommendation BT.601-7 (2011), luma equation.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    if path.suffix.lower() not in FRAME_SUFFIXES:
+        raise InputError(f"{path}: expected an image file ({', '.join(FRAME_SUFFIXES)})")
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
+        raise InputError(f"{path}: not a readable image")
+    if image.ndim == 3 and image.shape[2] in (1, 2, 3, 4):
+        image = _to_gray(path, image)
+    if image.ndim != 2:
+        raise InputError(
+            f"{path}: expected a 2-D frame (grey or colour), got an array of shape {image.shape}"
+        )
+    return image
+
+
+def read_frame_set(paths: Sequence[str | Path]) -> NDArray:
+    """Read several frames of equal shape and dtype into one stack.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        The frames, in the order wanted (e.g. of the phase steps).
+
+    Returns
+    -------
+    ndarray, shape (N, rows, cols)
+        The frames as :func:`read_frame` returns them, stacked along axis 0.
+
+    Raises
+    ------
+    InputError
+        If ``paths`` is empty, a frame cannot be read (see :func:`read_frame`), or a frame's
+        shape or dtype differs from the first frame's; the message names the first such
+        file, the first file, and both shapes (or dtypes).
+    """
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise InputError("read_frame_set: no files given; expected at least one frame")
+    first = read_frame(paths[0])
+    stack = np.empty((len(paths), *first.shape), dtype=first.dtype)
+    stack[0] = first
+    for index, path in enumerate(paths[1:], start=1):
+        frame = read_frame(path)
+        if frame.shape != first.shape:
+            raise InputError(
+                f"{path}: frame shape {frame.shape} differs from the shape {first.shape} "
+                f"of {paths[0]}"
+            )
+        if frame.dtype != first.dtype:
+            raise InputError(
+                f"{path}: frame dtype {frame.dtype} differs from the dtype {first.dtype} "
+                f"of {paths[0]}"
+            )
+        stack[index] = frame
+    return stack

@@ -1,0 +1,50 @@
+"""The Examples sections of the pipeline's main public faces run, and show what they say.
+
+Each module listed must hold at least one example (a module whose examples were all deleted
+would otherwise pass silently), and every example must give the output written under it.
+"""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import numpy as np
+import pytest
+
+MODULES_WITH_EXAMPLES = (
+    "wavestack.pipeline.zernike.indices",  # noll_to_nm, index_to_nm
+    "wavestack.pipeline.zernike.conversion",  # convert_coefficients
+    "wavestack.pipeline.zernike.names",  # mode_name
+    "wavestack.pipeline.aperture.region",  # Aperture.from_mask
+    "wavestack.pipeline.fit.build",  # build_fitter
+    "wavestack.pipeline.phase.psi.algorithms",  # phase_from_frames
+    "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
+)
+
+
+@pytest.mark.parametrize("name", MODULES_WITH_EXAMPLES)
+def test_examples_run_and_match(name: str) -> None:
+    module = importlib.import_module(name)
+    finder = doctest.DocTestFinder(exclude_empty=True)
+    tests = [test for test in finder.find(module, name) if test.examples]
+    assert tests, f"{name} has no Examples section any more"
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    with np.printoptions(legacy=False):
+        for test in tests:
+            runner.run(test)
+    outcome = runner.summarize(verbose=False)
+    assert outcome.attempted > 0
+    assert outcome.failed == 0, f"{outcome.failed} of {outcome.attempted} examples failed in {name}"
+
+
+def test_a_wrong_example_is_caught() -> None:
+    """The check above can fail: an example with a wrong expected output is counted as failed."""
+    parser = doctest.DocTestParser()
+    test = parser.get_doctest(
+        ">>> from wavestack.pipeline import noll_to_nm\n>>> noll_to_nm(4)\n(2, 2)\n",
+        {}, "wrong", "wrong.py", 0,
+    )
+    runner = doctest.DocTestRunner()
+    runner.run(test, out=lambda text: None)
+    assert runner.summarize(verbose=False).failed == 1
