@@ -24,7 +24,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from wavestack.paper_apertures import PAPER_APERTURES, annulus_circular_hole_mask  # noqa: E402
+from wavestack.bench import PAPER_APERTURES, annulus_circular_hole_mask  # noqa: E402
 from wavestack.pipeline import Aperture, build_fitter  # noqa: E402
 from wavestack.pipeline import csf_qcm_map  # noqa: E402
 

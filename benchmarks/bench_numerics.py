@@ -19,7 +19,7 @@ from math import comb
 import numpy as np
 import scipy.linalg
 
-from wavestack.paper_apertures import rounded_rectangle_mask
+from wavestack.bench import rounded_rectangle_mask
 from wavestack.pipeline import build_fitter, mode_list, zernike_basis, zernike_radial
 
 

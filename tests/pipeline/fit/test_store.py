@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavestack.paper_apertures import annulus_circular_hole_mask, butterfly_mask
+from wavestack.bench import annulus_circular_hole_mask, butterfly_mask
 from wavestack.pipeline import build_fitter
 from wavestack.pipeline.fit.store import FitterStore, fitter_key, load_fitter, save_fitter
 

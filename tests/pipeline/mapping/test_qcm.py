@@ -1,6 +1,6 @@
 """CSF-QCM and conformal maps of the paper's apertures, and fitters built on them.
 
-The apertures are those of ``wavestack.paper_apertures`` (512 x 512, ~15k-vertex meshes, as in
+The apertures are those of ``wavestack.bench.paper_apertures`` (512 x 512, ~15k-vertex meshes, as in
 issue "CSF-QCM"); the maps are built once per module.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wavestack.paper_apertures import (
+from wavestack.bench import (
     PAPER_APERTURES,
     annulus_circular_hole_mask,
     butterfly_mask,
