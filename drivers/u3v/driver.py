@@ -326,8 +326,11 @@ class U3VCamera:
         DeviceTimeout
             No frame within ``timeout_s`` (e.g. waiting for a trigger, or not started).
         DeviceDisconnected
-            The camera was unplugged (after the pending frames are read) or closed.
+            The camera was unplugged (after the pending frames are read) or closed (at once:
+            closing is final, frames still pending are not delivered).
         """
+        if self._closed:
+            raise DeviceDisconnected(self._name, "camera closed")
         return self._ring.get(timeout_s)
 
     def counters(self) -> U3VCounters:
