@@ -143,9 +143,11 @@ def test_the_plc_sees_only_clamped_rate_limited_commands_and_a_heartbeat(station
     config = _config()
     outputs = replace(config.outputs, max_removal_nm=20.0, max_step_nm=5.0, gain=1.0)
     # a generous watchdog: this test is about the values sent; a machine loaded enough to stall
-    # the pipeline for the default 2 s (seen once in CI) would rightly trip it
+    # the pipeline for the default 2 s (seen once in CI) would rightly trip it. Likewise a generous
+    # result age: on a loaded machine results older than 1 s are rightly held, and fewer are sent
     plc = replace(config.plc, link=replace(config.plc.link, watchdog_timeout_s=20.0))
-    station, devices = station_factory(replace(config, outputs=outputs, plc=plc))
+    station_settings = replace(config.station, max_result_age_s=20.0)
+    station, devices = station_factory(replace(config, outputs=outputs, plc=plc, station=station_settings))
     results, _ = _run(station, 8)
     plc = devices.plc_simulator
     sent = np.asarray(plc.program.accepted_removals)
@@ -282,7 +284,10 @@ def test_a_watchdog_tripped_before_any_command_is_rearmed_once_at_start(station_
 
     config = _config()
     plc = replace(config.plc, link=replace(config.plc.link, watchdog_timeout_s=1.0))
-    station, devices = station_factory(replace(config, plc=plc))
+    # a generous result age: this test is about the watchdog; results a loaded machine makes older
+    # than 1 s would rightly be held and send fewer commands
+    station_settings = replace(config.station, max_result_age_s=20.0)
+    station, devices = station_factory(replace(config, plc=plc, station=station_settings))
     time.sleep(2.0)  # connected (first heartbeat) and idle: the PLC's watchdog trips
     assert devices.plc_simulator.watchdog_trips >= 1
     results, _ = _run(station, 4)
