@@ -30,6 +30,7 @@ from wavestack.drivers.plc import PolishingLink
 from wavestack.drivers.safety import SafetyLimits, SafetyStage
 from wavestack.config import OutputSettings
 from wavestack.station.results import Heartbeat, OutputRecord, SentCommand, StationResult
+from wavestack.pipeline import wavefront_to_surface, waves_to_nm
 
 logger = logging.getLogger(__name__)
 
@@ -97,7 +98,8 @@ class PlcOutput:
         self._link = link
         self._settings = settings
         self._n_terms = n_terms
-        self._scale_nm = wavelength_nm * settings.surface_factor * settings.gain
+        # removal (surface nm) per wave of measured wavefront
+        self._scale_nm = wavefront_to_surface(waves_to_nm(1.0, wavelength_nm), settings.surface_factor) * settings.gain
         self._timeout_s = timeout_s
         self._command_id = 0
         self._max_age_s = max_age_s
