@@ -8,9 +8,7 @@ not its speckled halo, is found.
 from __future__ import annotations
 
 import dataclasses
-import logging
 import math
-import time
 
 import cv2
 import numpy as np
@@ -24,7 +22,6 @@ from wavestack.pipeline.aperture.detect import DetectionSettings, detect_apertur
 from shared_data import DATA
 
 _DATA = DATA / "psi-mirror-654nm"
-_LOG = logging.getLogger(__name__)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -416,14 +413,14 @@ def test_real_tilted_set_gives_the_same_circle(
     assert relaxed.aperture.topology is Topology.SIMPLY_CONNECTED
 
 
-# ----------------------------------------------------------------------------- speed
+# ----------------------------------------------------------------------------- a large map
 
 
-def test_speed_at_1024(record_property: pytest.RecordProperty) -> None:
-    """Median detection time at 1024^2 against one numpy read (np.max) of the same map.
+def test_detection_at_1024_closes_specks_and_fills_dropouts() -> None:
+    """A 1024^2 map with a speckled halo, pinholes and 49-px dropouts: one simply connected aperture.
 
-    Only a loose bound is asserted (timing on shared CI machines is noisy); the numbers are
-    logged and recorded as test properties.
+    Its speed is measured by ``benchmarks/bench_signal.py``, never here: timed tests on a shared
+    machine fail for reasons that are not the code's.
     """
     rng = np.random.default_rng(3)
     n = 1024
@@ -437,20 +434,8 @@ def test_speed_at_1024(record_property: pytest.RecordProperty) -> None:
     for row, col in rng.uniform(250, 770, (20, 2)):  # 49-px dropouts: filled
         signal[np.hypot(rows - row, cols - col) <= 4] = 0.0
 
-    def median_ms(action: object, repeats: int = 15) -> float:
-        times = []
-        for _ in range(repeats):
-            start = time.perf_counter()
-            action()  # type: ignore[operator]
-            times.append(time.perf_counter() - start)
-        return 1e3 * float(np.median(times))
-
-    result = detect_aperture(signal)  # also a warm-up
+    result = detect_aperture(signal)
     assert result.aperture.topology is Topology.SIMPLY_CONNECTED
     assert result.filled_dropouts == 20
-    memory_ms = median_ms(lambda: np.max(signal))
-    detect_ms = median_ms(lambda: detect_aperture(signal))
-    record_property("memory_pass_ms", memory_ms)
-    record_property("detect_ms", detect_ms)
-    _LOG.info("1024^2 detection %.2f ms, memory pass %.3f ms", detect_ms, memory_ms)
-    assert detect_ms < 250.0
+    # the half-way edge of a unit step at r = 400 beside a halo of mean ~0.17: within a pixel of 400
+    assert abs(np.sqrt(result.aperture.valid_count / np.pi) - 400.0) < 1.0
