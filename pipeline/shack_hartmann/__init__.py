@@ -35,7 +35,7 @@ References
 
 from __future__ import annotations
 
-from .centroids import Centroider, SpotMeasurement, centroid_spots
+from .centroids import Centroider, SpotMeasurement, camera_frame, centroid_spots
 from .grid import LensletGrid
 from .grid_detection import detect_grid
 from .modal import ModalReconstructor
@@ -49,6 +49,7 @@ __all__ = [
     "SlopeResult",
     "SouthwellReconstructor",
     "SpotMeasurement",
+    "camera_frame",
     "centroid_spots",
     "convert_slopes",
     "detect_grid",

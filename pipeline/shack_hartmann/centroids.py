@@ -36,6 +36,7 @@ from .lit import _check_threshold, _usable_lenslets, ThresholdKind
 __all__ = [
     "Centroider",
     "SpotMeasurement",
+    "camera_frame",
     "centroid_spots",
 ]
 
@@ -227,8 +228,9 @@ class Centroider:
         Parameters
         ----------
         frame : array_like, shape ``frame_shape``
-            Camera frame, any real dtype (uint8/uint16/float). Non-finite pixels make their
-            subaperture invalid.
+            Camera frame, any real dtype (uint8/uint16/float) and any memory layout (C or
+            Fortran order, a transposed or strided view; see :func:`camera_frame`). Non-finite
+            pixels make their subaperture invalid.
 
         Returns
         -------
@@ -240,7 +242,7 @@ class Centroider:
         ValueError
             If ``frame`` is not a real 2-D array of shape ``frame_shape``.
         """
-        image = real_image(frame, "frame")
+        image = camera_frame(frame)
         if image.shape != self.frame_shape:
             raise ValueError(f"frame must have shape {self.frame_shape}, got {image.shape}")
         rows, cols = self.grid.shape
@@ -290,6 +292,35 @@ class Centroider:
         return gathered.astype(np.float32).reshape(rows, width, cols * width)
 
 
+def camera_frame(frame: ArrayLike, name: str = "frame") -> NDArray:
+    """A camera frame as this package computes on it: 2-D, real, C-contiguous.
+
+    The one door through which frames enter the Shack-Hartmann functions. A frame may be any
+    2-D array of real numbers in any memory layout: C or Fortran order (a frame loaded from a
+    MATLAB file), a transposed or strided view, any byte order; OpenCV's in-place kernels
+    need a C-contiguous buffer, so such a frame is copied once into C order (no copy when
+    it already is). The pixel values and the dtype are unchanged.
+
+    Parameters
+    ----------
+    frame : array_like, shape (rows, cols)
+        Camera frame: uint8, uint16, any other integer type, float32 or float64.
+    name : str
+        What the frame is called in error messages.
+
+    Returns
+    -------
+    ndarray, shape (rows, cols)
+        C-contiguous, the dtype of ``frame``.
+
+    Raises
+    ------
+    ValueError
+        If ``frame`` is not a 2-D array of real numbers (booleans and complex are refused).
+    """
+    return np.ascontiguousarray(real_image(frame, name))
+
+
 def centroid_spots(
     frame: ArrayLike,
     grid: LensletGrid,
@@ -307,7 +338,7 @@ def centroid_spots(
     Parameters
     ----------
     frame : array_like, shape (rows, cols)
-        Camera frame, any real dtype.
+        Camera frame, any real dtype and memory layout (see :func:`camera_frame`).
     grid : LensletGrid
     threshold, threshold_kind, min_intensity, mask
         As for :meth:`Centroider.build`.
@@ -325,7 +356,7 @@ def centroid_spots(
     ----------
     Thomas et al. (2006), MNRAS 371, 323 (thresholded centre of gravity).
     """
-    image = real_image(frame, "frame")
+    image = camera_frame(frame)
     centroider = Centroider.build(
         grid,
         image.shape,

@@ -12,8 +12,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize_scalar
 
-from .._checks import finite_float, real_image
-from .centroids import _gather_rows_cols, Centroider
+from .._checks import finite_float
+from .centroids import _gather_rows_cols, camera_frame, Centroider
 from .grid import _EDGE_TOL, _MIN_PITCH_PX, LensletGrid
 
 logger = logging.getLogger(__name__)
@@ -56,7 +56,7 @@ def detect_grid(frame: ArrayLike, pitch_px_guess: float | None = None) -> Lensle
     Parameters
     ----------
     frame : array_like, shape (rows, cols)
-        Camera frame, any real dtype, background roughly uniform.
+        Camera frame, any real dtype and memory layout, background roughly uniform.
     pitch_px_guess : float, optional
         Approximate pitch in pixels; narrows the search to ``[0.8, 1.25]`` times it.
 
@@ -83,7 +83,7 @@ def detect_grid(frame: ArrayLike, pitch_px_guess: float | None = None) -> Lensle
     on a reference frame. Lenslets that are dim (partly illuminated at the pupil edge) may
     fall outside the bounding box.
     """
-    image = real_image(frame, "frame").astype(np.float64, copy=False)
+    image = camera_frame(frame).astype(np.float64, copy=False)
     if not np.all(np.isfinite(image)):
         raise ValueError("frame must be finite, got NaN or infinite pixels")
     guess = None if pitch_px_guess is None else finite_float(pitch_px_guess, "pitch_px_guess")
