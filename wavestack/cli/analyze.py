@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from wavestack.cli.analyze_sh import add_shack_hartmann_arguments, requested as shack_hartmann, run_shack_hartmann
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.pipeline import Aperture, InputError, build_fitter
@@ -57,6 +58,7 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--diameter-mm", type=float, help="diameter of the analysed aperture, mm")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--save-map", metavar="OUT.npy", help="save the analysed wavefront (waves, NaN outside)")
+    add_shack_hartmann_arguments(parser)
 
 
 def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float]:
@@ -127,6 +129,8 @@ def _apply_null_test(args: argparse.Namespace, test: ConicTest, aperture: Apertu
 
 def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack analyze``; returns the exit status."""
+    if shack_hartmann(args):
+        return run_shack_hartmann(args)
     try:
         measured, wavelength_nm = _measure(args)
     except InputError:
