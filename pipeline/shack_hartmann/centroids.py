@@ -49,7 +49,8 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True, eq=False)
 class SpotMeasurement:
-    """Spot centres of one frame, one entry per lenslet (row-major).
+    """Spot centres of one frame, one entry per lenslet (row-major for a grid, in the order of
+    the sites for a lattice).
 
     Attributes
     ----------
