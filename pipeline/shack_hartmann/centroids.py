@@ -31,11 +31,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._checks import finite_float, positive_int, real_image
 from .grid import LensletGrid
+from .lattice import LensletLattice
 from .lit import _check_threshold, _usable_lenslets, ThresholdKind
 
 __all__ = [
     "Centroider",
     "SpotMeasurement",
+    "camera_frame",
     "centroid_spots",
 ]
 
@@ -47,7 +49,8 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True, eq=False)
 class SpotMeasurement:
-    """Spot centres of one frame, one entry per lenslet (row-major).
+    """Spot centres of one frame, one entry per lenslet (row-major for a grid, in the order of
+    the sites for a lattice).
 
     Attributes
     ----------
@@ -111,7 +114,10 @@ class Centroider:
 
     Attributes
     ----------
-    grid : LensletGrid
+    grid : LensletGrid or LensletLattice
+        A square grid (windows of side ``floor(pitch)``) or a square or hexagonal lattice at
+        any orientation (windows inside each lenslet's Voronoi cell, see
+        :mod:`~wavestack.pipeline.shack_hartmann.lattice`), gathered per lenslet.
     frame_shape : tuple of int
         ``(rows, cols)`` of the frames this centroider accepts.
     threshold : float
@@ -127,27 +133,27 @@ class Centroider:
         Lenslets whose centre lies inside the mask given to :meth:`build` (all True without).
     """
 
-    grid: LensletGrid
+    grid: LensletGrid | LensletLattice
     frame_shape: tuple[int, int]
     threshold: float
     threshold_kind: ThresholdKind
     min_intensity: float
     usable: NDArray[np.bool_]
+    _blocks: tuple[int, int] = field(repr=False)  # windows laid out as (rows, cols) blocks
     _row_starts: NDArray[np.intp] = field(repr=False)
     _col_starts: NDArray[np.intp] = field(repr=False)
     _width: int = field(repr=False)
-    _contiguous: bool = field(repr=False)
+    _layout: str = field(repr=False)  # "crop", "gather" (separable grid) or "lattice"
     _gather_rows: NDArray[np.intp] = field(repr=False)
     _weights_row: NDArray[np.float32] = field(repr=False)  # (2, W): [1, dy]
     _weights_col: NDArray[np.float32] = field(repr=False)  # (W, 2): [1, dx]
     _ones: NDArray[np.float32] = field(repr=False)  # (1, W)
-    _origin_col: NDArray[np.float64] = field(repr=False)  # (cols,) column of each window centre
-    _origin_row: NDArray[np.float64] = field(repr=False)  # (rows,)
+    _origin: NDArray[np.float64] = field(repr=False)  # (blocks, 2) (col, row) of each window centre
 
     @classmethod
     def build(
         cls,
-        grid: LensletGrid,
+        grid: LensletGrid | LensletLattice,
         frame_shape: tuple[int, int],
         *,
         threshold: float = 0.1,
@@ -159,7 +165,7 @@ class Centroider:
 
         Parameters
         ----------
-        grid : LensletGrid
+        grid : LensletGrid or LensletLattice
         frame_shape : tuple of int
             ``(rows, cols)`` of the camera frames, pixels.
         threshold : float, default 0.1
@@ -171,7 +177,8 @@ class Centroider:
             set it (or ``mask``) to reject dark subapertures.
         mask : array_like of bool, optional
             Aperture mask, either of ``frame_shape`` (a lenslet is usable when the pixel
-            nearest its centre is True) or of ``grid.shape`` (one flag per lenslet).
+            nearest its centre is True), of ``grid.shape`` for a grid, or of ``(L,)`` (one
+            flag per lenslet).
 
         Returns
         -------
@@ -184,8 +191,8 @@ class Centroider:
             integers, the threshold or its kind is invalid, ``min_intensity`` is negative or
             not finite, or the mask has neither accepted shape.
         """
-        if not isinstance(grid, LensletGrid):
-            raise ValueError(f"grid must be a LensletGrid, got {type(grid).__name__}")
+        if not isinstance(grid, (LensletGrid, LensletLattice)):
+            raise ValueError(f"grid must be a LensletGrid or LensletLattice, got {type(grid).__name__}")
         try:
             n_rows, n_cols = frame_shape
         except (TypeError, ValueError):
@@ -199,9 +206,16 @@ class Centroider:
         usable = _usable_lenslets(grid, shape, mask)
 
         row_starts, col_starts, width = grid.window_starts()
-        contiguous = bool(np.all(np.diff(row_starts) == width) and np.all(np.diff(col_starts) == width))
         local = np.arange(width, dtype=np.float64) - 0.5 * (width - 1)
         weights_row = np.stack([np.ones(width), local]).astype(np.float32)
+        if isinstance(grid, LensletGrid):
+            blocks = grid.shape
+            contiguous = bool(np.all(np.diff(row_starts) == width) and np.all(np.diff(col_starts) == width))
+            layout = "crop" if contiguous else "gather"
+            corner = np.stack(np.broadcast_arrays(col_starts[None, :], row_starts[:, None]), axis=-1)
+        else:
+            blocks, layout = (1, grid.count), "lattice"
+            corner = np.column_stack([col_starts, row_starts])
         return cls(
             grid=grid,
             frame_shape=shape,
@@ -209,16 +223,16 @@ class Centroider:
             threshold_kind=kind,
             min_intensity=floor,
             usable=usable,
+            _blocks=(int(blocks[0]), int(blocks[1])),
             _row_starts=row_starts,
             _col_starts=col_starts,
             _width=width,
-            _contiguous=contiguous,
+            _layout=layout,
             _gather_rows=(row_starts[:, None] + np.arange(width)).reshape(-1),
             _weights_row=weights_row,
             _weights_col=np.ascontiguousarray(weights_row.T),
             _ones=np.ones((1, width), dtype=np.float32),
-            _origin_col=col_starts + 0.5 * (width - 1),
-            _origin_row=row_starts + 0.5 * (width - 1),
+            _origin=corner.reshape(-1, 2) + 0.5 * (width - 1),
         )
 
     def measure(self, frame: ArrayLike) -> SpotMeasurement:
@@ -227,8 +241,9 @@ class Centroider:
         Parameters
         ----------
         frame : array_like, shape ``frame_shape``
-            Camera frame, any real dtype (uint8/uint16/float). Non-finite pixels make their
-            subaperture invalid.
+            Camera frame, any real dtype (uint8/uint16/float) and any memory layout (C or
+            Fortran order, a transposed or strided view; see :func:`camera_frame`). Non-finite
+            pixels make their subaperture invalid.
 
         Returns
         -------
@@ -240,10 +255,10 @@ class Centroider:
         ValueError
             If ``frame`` is not a real 2-D array of shape ``frame_shape``.
         """
-        image = real_image(frame, "frame")
+        image = camera_frame(frame)
         if image.shape != self.frame_shape:
             raise ValueError(f"frame must have shape {self.frame_shape}, got {image.shape}")
-        rows, cols = self.grid.shape
+        rows, cols = self._blocks
         width = self._width
         windows = self._windows(image)  # (rows, W, cols * W) float32, a private copy
 
@@ -267,9 +282,7 @@ class Centroider:
         centroids = np.full((rows, cols, 2), np.nan)
         np.divide(moment_col, intensity, out=centroids[..., 0], where=lit)
         np.divide(moment_row, intensity, out=centroids[..., 1], where=lit)
-        centroids[..., 0] += self._origin_col[None, :]
-        centroids[..., 1] += self._origin_row[:, None]
-        centroids = centroids.reshape(-1, 2)
+        centroids = centroids.reshape(-1, 2) + self._origin
         intensity = intensity.reshape(-1)
         valid = (
             self.usable
@@ -280,19 +293,52 @@ class Centroider:
 
     def _windows(self, image: NDArray) -> NDArray[np.float32]:
         """All subaperture windows as a new float32 array of shape (rows, W, cols * W)."""
-        rows, cols = self.grid.shape
+        rows, cols = self._blocks
         width = self._width
-        if self._contiguous:
+        if self._layout == "crop":
             r0, c0 = int(self._row_starts[0]), int(self._col_starts[0])
             crop = image[r0 : r0 + rows * width, c0 : c0 + cols * width]
             return crop.astype(np.float32).reshape(rows, width, cols * width)
+        if self._layout == "lattice":  # one W x W window per lenslet, side by side
+            views = np.lib.stride_tricks.sliding_window_view(image, (width, width))
+            gathered = views[self._row_starts, self._col_starts].transpose(1, 0, 2)
+            return gathered.astype(np.float32).reshape(1, width, cols * width)
         gathered = _gather_rows_cols(image, self._gather_rows, self._col_starts, width)
         return gathered.astype(np.float32).reshape(rows, width, cols * width)
 
 
+def camera_frame(frame: ArrayLike, name: str = "frame") -> NDArray:
+    """A camera frame as this package computes on it: 2-D, real, C-contiguous.
+
+    The one door through which frames enter the Shack-Hartmann functions. A frame may be any
+    2-D array of real numbers in any memory layout: C or Fortran order (a frame loaded from a
+    MATLAB file), a transposed or strided view, any byte order; OpenCV's in-place kernels
+    need a C-contiguous buffer, so such a frame is copied once into C order (no copy when
+    it already is). The pixel values and the dtype are unchanged.
+
+    Parameters
+    ----------
+    frame : array_like, shape (rows, cols)
+        Camera frame: uint8, uint16, any other integer type, float32 or float64.
+    name : str
+        What the frame is called in error messages.
+
+    Returns
+    -------
+    ndarray, shape (rows, cols)
+        C-contiguous, the dtype of ``frame``.
+
+    Raises
+    ------
+    ValueError
+        If ``frame`` is not a 2-D array of real numbers (booleans and complex are refused).
+    """
+    return np.ascontiguousarray(real_image(frame, name))
+
+
 def centroid_spots(
     frame: ArrayLike,
-    grid: LensletGrid,
+    grid: LensletGrid | LensletLattice,
     *,
     threshold: float = 0.1,
     threshold_kind: ThresholdKind = "relative",
@@ -307,8 +353,8 @@ def centroid_spots(
     Parameters
     ----------
     frame : array_like, shape (rows, cols)
-        Camera frame, any real dtype.
-    grid : LensletGrid
+        Camera frame, any real dtype and memory layout (see :func:`camera_frame`).
+    grid : LensletGrid or LensletLattice
     threshold, threshold_kind, min_intensity, mask
         As for :meth:`Centroider.build`.
 
@@ -325,7 +371,7 @@ def centroid_spots(
     ----------
     Thomas et al. (2006), MNRAS 371, 323 (thresholded centre of gravity).
     """
-    image = real_image(frame, "frame")
+    image = camera_frame(frame)
     centroider = Centroider.build(
         grid,
         image.shape,

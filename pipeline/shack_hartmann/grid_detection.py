@@ -12,8 +12,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import minimize_scalar
 
-from .._checks import finite_float, real_image
-from .centroids import _gather_rows_cols, Centroider
+from .._checks import finite_float
+from .centroids import _gather_rows_cols, camera_frame, Centroider
 from .grid import _EDGE_TOL, _MIN_PITCH_PX, LensletGrid
 
 logger = logging.getLogger(__name__)
@@ -29,6 +29,14 @@ _LIT_FRACTION = 0.25  # detect_grid: a lenslet is lit above bg + this * (typical
 
 
 _PITCH_MISMATCH = 0.005  # relative row/column pitch difference that detect_grid reports
+
+
+# relative row/column pitch difference that detect_grid refuses: the periodogram pitches of a
+# small array differ by a few per cent; a hexagonal array's by 42 % (p / 2 against p sqrt(3) / 2)
+_PITCH_REFUSED = 0.05
+
+
+_RESIDUAL = 0.25  # detect_grid refuses a grid with a lit spot farther than this many pitches from its centre
 
 
 def detect_grid(frame: ArrayLike, pitch_px_guess: float | None = None) -> LensletGrid:
@@ -51,12 +59,13 @@ def detect_grid(frame: ArrayLike, pitch_px_guess: float | None = None) -> Lensle
     5. Refinement: the lit spots are centroided on that grid and ``col = c0 + p j``,
        ``row = r0 + p i`` (one pitch ``p``) fitted to them by least squares. The periodogram
        pitch is biased by the pupil envelope by a few 1e-3 pixel, a tenth of a pixel across
-       40 lenslets; the fit is limited only by the centroid noise.
+       40 lenslets; the fit is limited only by the centroid noise. Every lit spot must lie
+       within a quarter pitch of its fitted centre.
 
     Parameters
     ----------
     frame : array_like, shape (rows, cols)
-        Camera frame, any real dtype, background roughly uniform.
+        Camera frame, any real dtype and memory layout, background roughly uniform.
     pitch_px_guess : float, optional
         Approximate pitch in pixels; narrows the search to ``[0.8, 1.25]`` times it.
 
@@ -69,7 +78,11 @@ def detect_grid(frame: ArrayLike, pitch_px_guess: float | None = None) -> Lensle
     ------
     ValueError
         If ``frame`` is not a finite real 2-D array, ``pitch_px_guess`` is not a number
-        ``>= 4``, or no periodic spot pattern is found.
+        ``>= 4``, no periodic spot pattern is found, the pitches along the rows and columns
+        differ by more than 5 % (a hexagonal or rectangular array), or a lit spot lies more
+        than a quarter pitch from its fitted lenslet centre: never a grid that does not match
+        the spots. :func:`~wavestack.pipeline.shack_hartmann.detect_lattice` fits hexagonal
+        and turned lattices.
 
     Notes
     -----
@@ -83,7 +96,7 @@ def detect_grid(frame: ArrayLike, pitch_px_guess: float | None = None) -> Lensle
     on a reference frame. Lenslets that are dim (partly illuminated at the pupil edge) may
     fall outside the bounding box.
     """
-    image = real_image(frame, "frame").astype(np.float64, copy=False)
+    image = camera_frame(frame).astype(np.float64, copy=False)
     if not np.all(np.isfinite(image)):
         raise ValueError("frame must be finite, got NaN or infinite pixels")
     guess = None if pitch_px_guess is None else finite_float(pitch_px_guess, "pitch_px_guess")
@@ -93,9 +106,15 @@ def detect_grid(frame: ArrayLike, pitch_px_guess: float | None = None) -> Lensle
     row_profile = image.sum(axis=1)  # a function of the row
     pitch_col = _profile_period(col_profile, guess, "columns")
     pitch_row = _profile_period(row_profile, guess, "rows")
-    if abs(pitch_col - pitch_row) > _PITCH_MISMATCH * max(pitch_col, pitch_row):
+    mismatch = abs(pitch_col - pitch_row) / max(pitch_col, pitch_row)
+    if _PITCH_MISMATCH < mismatch <= _PITCH_REFUSED:
         logger.warning(
             "pitch along columns %.4f px and rows %.4f px differ; using their mean", pitch_col, pitch_row
+        )
+    if mismatch > _PITCH_REFUSED:
+        raise ValueError(
+            f"frame: the spots repeat every {pitch_col:.2f} px along the columns and {pitch_row:.2f} px along "
+            f"the rows; expected one square grid (detect_lattice finds hexagonal and turned lattices)"
         )
     pitch = 0.5 * (pitch_col + pitch_row)
     spot_col = _fold(col_profile, pitch)
@@ -191,6 +210,14 @@ def _refined(image: NDArray[np.float64], coarse: LensletGrid, lit: NDArray[np.bo
     )
     target = np.concatenate([measured.centroids[use, 0], measured.centroids[use, 1]])
     (col0, row0, pitch), *_ = np.linalg.lstsq(design, target, rcond=None)
+    residual = (target - design @ np.array([col0, row0, pitch])).reshape(2, -1)
+    distance = np.hypot(residual[0], residual[1])
+    if distance.max() > _RESIDUAL * pitch:
+        raise ValueError(
+            f"frame: {int(np.count_nonzero(distance > _RESIDUAL * pitch))} of {distance.size} lit spots lie farther "
+            f"than {_RESIDUAL} pitch from the fitted square grid of pitch {pitch:.2f} px (worst {distance.max():.2f} "
+            f"px); expected a square lenslet grid (detect_lattice finds hexagonal and turned lattices)"
+        )
     refined = LensletGrid(pitch_px=float(pitch), offset_px=(float(col0), float(row0)), shape=coarse.shape)
     try:
         refined.check_fits(image.shape)

@@ -11,29 +11,33 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._checks import finite_float
 from .grid import LensletGrid
+from .lattice import LensletLattice
 
 
 ThresholdKind = Literal["relative", "absolute"]
 
 
 def _usable_lenslets(
-    grid: LensletGrid, frame_shape: tuple[int, int], mask: ArrayLike | None
+    grid: LensletGrid | LensletLattice, frame_shape: tuple[int, int], mask: ArrayLike | None
 ) -> NDArray[np.bool_]:
-    """Lenslets whose centre is inside the mask (pixel mask) or flagged (lenslet mask)."""
+    """Lenslets whose centre is inside the mask (pixel mask) or flagged (lenslet mask: the
+    grid's ``(rows, cols)`` or one flag per lenslet, ``(L,)``)."""
     if mask is None:
         return np.ones(grid.count, dtype=bool)
     flags = np.asarray(mask)
     if flags.dtype != np.bool_:
         raise ValueError(f"mask must be a boolean array, got dtype {flags.dtype}")
-    if flags.shape == tuple(grid.shape):
+    per_lenslet = [(grid.count,)] + ([tuple(grid.shape)] if isinstance(grid, LensletGrid) else [])
+    if flags.shape in per_lenslet:
         return flags.reshape(-1).copy()
     if flags.shape == tuple(frame_shape):
         centres = grid.centres().reshape(-1, 2)
         col = np.clip(np.rint(centres[:, 0]).astype(np.intp), 0, frame_shape[1] - 1)
         row = np.clip(np.rint(centres[:, 1]).astype(np.intp), 0, frame_shape[0] - 1)
         return flags[row, col]
+    shapes = " or ".join(str(shape) for shape in per_lenslet)
     raise ValueError(
-        f"mask must have the frame shape {tuple(frame_shape)} or the grid shape {grid.shape}, "
+        f"mask must have the frame shape {tuple(frame_shape)} or one flag per lenslet {shapes}, "
         f"got {flags.shape}"
     )
 

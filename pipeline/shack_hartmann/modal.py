@@ -2,9 +2,10 @@
 
 Both reconstructors (this one and the zonal one) take slopes ``dW/dx, dW/dy`` (x right, y up) in
 *wavefront units per unit of the lenslet coordinates*: with lenslet centres in camera pixels
-(``LensletGrid.centres_xy``) and slopes in radians from
-:func:`~wavestack.pipeline.shack_hartmann.centroids.slopes`, multiply the slopes by the pixel
-size in micrometres (:func:`~wavestack.pipeline.shack_hartmann.centroids.convert_slopes` with
+(``LensletGrid.centres_xy`` or ``LensletLattice.centres_xy``: the modal reconstructor needs
+only the centres, so any lattice works) and slopes in radians from
+:func:`~wavestack.pipeline.shack_hartmann.spot_slopes.slopes`, multiply the slopes by the pixel
+size in micrometres (:func:`~wavestack.pipeline.shack_hartmann.spot_slopes.convert_slopes` with
 ``wavefront_unit_um=1, length_unit_um=pixel_um``) and the result comes out in micrometres.
 Everything that depends only on the geometry is computed once; a frame costs a matrix-vector
 product (modal) or one sparse triangular solve pair (zonal).

@@ -8,7 +8,9 @@ the phase difference. The sparse system is solved in the least-squares sense thr
 normal equations (a graph Laplacian), factorised once with one phase pinned per connected
 group of lenslets; piston is then set to zero mean over each group. (Fried's geometry, with
 the phase at the lenslet corners, is not implemented: it has an unsensed waffle mode, and the
-co-located Southwell estimate is what the modal results are compared with.)
+co-located Southwell estimate is what the modal results are compared with.) The neighbour
+pairs are those of a square grid (a :class:`~wavestack.pipeline.shack_hartmann.grid.LensletGrid`);
+a hexagonal lattice goes through the modal reconstructor.
 
 References
 ----------

@@ -16,6 +16,7 @@ import numpy as np
 
 from wavestack.cli.analyze_aperture import add_aperture_arguments, aperture_choice, aperture_report
 from wavestack.cli.analyze_aperture import format_aperture, refuse_for_measured_map
+from wavestack.cli.analyze_sh import add_shack_hartmann_arguments, requested as shack_hartmann, run_shack_hartmann
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.pipeline import Aperture, InputError, build_fitter
@@ -60,6 +61,7 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--save-map", metavar="OUT.npy", help="save the analysed wavefront (waves, NaN outside)")
     add_aperture_arguments(parser)
+    add_shack_hartmann_arguments(parser)
 
 
 def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float]:
@@ -134,6 +136,8 @@ def _apply_null_test(args: argparse.Namespace, test: ConicTest, aperture: Apertu
 
 def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack analyze``; returns the exit status."""
+    if shack_hartmann(args):
+        return run_shack_hartmann(args)
     try:
         measured, wavelength_nm = _measure(args)
     except InputError:
