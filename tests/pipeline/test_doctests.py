@@ -20,6 +20,8 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.fit.build",  # build_fitter
     "wavestack.pipeline.phase.psi.algorithms",  # phase_from_frames
     "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
+    "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice
+    "wavestack.pipeline.shack_hartmann.lattice_detection",  # detect_lattice
 )
 
 
