@@ -18,13 +18,16 @@ Private pieces shared across topics live at this root (``_angles``, ``_checks``)
 from __future__ import annotations
 
 from .aperture import (
+    APERTURE_CHOICES,
     Aperture,
     ApertureTracker,
     ApertureWatch,
     DetectionSettings,
+    EdgeCircle,
     EmptyAperture,
     Topology,
     UnsupportedAperture,
+    choose_aperture,
     compare_apertures,
     detect_aperture,
 )
@@ -128,10 +131,12 @@ __all__ = [
     "four_step",
     "hariharan_five_step",
     "csf_qcm_map",
+    "APERTURE_CHOICES",
     "Aperture",
     "ApertureTracker",
     "ConicTest",
     "DetectionSettings",
+    "EdgeCircle",
     "EmptyAperture",
     "FitBasis",
     "FitResult",
@@ -155,6 +160,7 @@ __all__ = [
     "available_methods",
     "build_fitter",
     "carrier_phase",
+    "choose_aperture",
     "convert_coefficients",
     "default_normalisation",
     "detect_aperture",

@@ -4,11 +4,12 @@ pyserial imports this module as ``wavestack.simulators.protocol_sim`` once
 :func:`~wavestack.simulators.serial_registry.register_serial_simulators` has added
 ``"wavestack.simulators"`` to ``serial.protocol_handler_packages``. URL form::
 
-    sim://mdt693b[/NAME][?echo=0&prompt=*&vlimit=100]
+    sim://mdt693b[/NAME][?echo=0&prompt=*&vlimit=100&cm=1]
     sim://mdt694b[...]                                 the one-axis model
+    sim://mdt693a[...]                                 the older MDT693A (its command set only)
 
 Without ``NAME`` every open gets a fresh device with the personality the query describes (defaults:
-echo on, prompt ``>``, limit switch at 150 V). With ``NAME`` the port talks to the device attached
+echo on, prompt ``>``, limit switch at 150 V, MDT693A compatibility mode off). With ``NAME`` the port talks to the device attached
 under that name with :func:`~wavestack.simulators.serial_registry.attach_simulated_device` (its
 personality is its own, so a query is refused).
 
@@ -31,9 +32,9 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_
 from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality
 from wavestack.simulators.serial_registry import find_simulated_device
 
-_MODELS = {"mdt693b": "MDT693B", "mdt694b": "MDT694B"}
+_MODELS = {"mdt693b": "MDT693B", "mdt694b": "MDT694B", "mdt693a": "MDT693A"}
 _POLL_S = 0.02  # how often a blocked read looks at the unplugged switch
-_URL_FORM = "sim://mdt693b[/NAME][?echo=0|1&prompt=>|*&vlimit=75|100|150]"
+_URL_FORM = "sim://mdt693b[/NAME][?echo=0|1&prompt=>|*&vlimit=75|100|150&cm=0|1]"
 
 
 class Serial(SerialBase):
@@ -237,13 +238,14 @@ def device_for_url(url: str) -> MDT693BDevice:
 
 
 def _personality(url: str, model: str, options: dict[str, list[str]]) -> MDT693BPersonality:
-    allowed = {"echo": ("0", "1"), "prompt": (">", "*"), "vlimit": ("75", "100", "150")}
+    allowed = {"echo": ("0", "1"), "prompt": (">", "*"), "vlimit": ("75", "100", "150"), "cm": ("0", "1")}
     for key, values in options.items():
         if key not in allowed or len(values) != 1 or values[0] not in allowed[key]:
             raise SerialException(f"{url!r}: option {key}={values} not understood; expected {_URL_FORM}")
     echo = options.get("echo", ["1"])[0] == "1"
     prompt = options.get("prompt", [">"])[0]
     vlimit = float(options.get("vlimit", ["150"])[0])
+    firmware = "3.01" if model == "MDT693A" else "1.10" if prompt == ">" else "1.05"
     return MDT693BPersonality(model=model, echo=echo, prompt=prompt,  # type: ignore[arg-type]
-                              firmware="1.10" if prompt == ">" else "1.05",
-                              decimals=2 if prompt == ">" else 1, vlimit_v=vlimit)
+                              firmware=firmware, decimals=2 if prompt == ">" else 1, vlimit_v=vlimit,
+                              compatibility_mode=options.get("cm", ["0"])[0] == "1")

@@ -1,13 +1,16 @@
 """Thorlabs MDT693B (3-axis) / MDT694B (1-axis) open-loop piezo controller.
 
-``protocol`` encodes and parses the ASCII protocol (pure, fuzzable), ``limits`` combines the
-software, device and limit-switch voltage ranges (pure), ``driver`` holds the serial connection
+``protocol`` encodes and parses the ASCII protocol (pure, fuzzable), ``command_sets`` holds the
+controller's own command set and the older MDT693A one (its compatibility mode; an MDT693A speaks
+only that) as data, ``limits`` combines the software, device and limit-switch voltage ranges (pure),
+``line`` runs the command exchanges on the serial port, ``driver`` knows what to ask
 (:class:`MDT693B`), ``phase_stepping`` sequences piezo steps with camera frames for
 phase-shifting interferometry.
 """
 
 from __future__ import annotations
 
+from wavestack.drivers.mdt693b.command_sets import A_COMMANDS, B_COMMANDS, CommandSet
 from wavestack.drivers.mdt693b.driver import MDT693B, VoltageReading
 from wavestack.drivers.mdt693b.limits import AxisLimits
 from wavestack.drivers.mdt693b.phase_stepping import (
@@ -19,7 +22,10 @@ from wavestack.drivers.mdt693b.phase_stepping import (
 from wavestack.drivers.mdt693b.protocol import DeviceIdentity, Reply
 
 __all__ = [
+    "A_COMMANDS",
+    "B_COMMANDS",
     "MDT693B",
+    "CommandSet",
     "AxisLimits",
     "DeviceIdentity",
     "PhaseShifter",

@@ -2,9 +2,10 @@
 
 The driver *has* a serial connection built with ``serial.serial_for_url``, so the same code runs on
 ``/dev/ttyUSB0``, ``COM3``, a pseudo-terminal path, ``socket://host:port`` and ``sim://mdt693b``.
-Bytes are encoded and parsed by :mod:`wavestack.drivers.mdt693b.protocol` and the voltage limits
-are combined by :mod:`wavestack.drivers.mdt693b.limits`; this module does the I/O, enforces the
-limits and handles the errors.
+Bytes are encoded and parsed by :mod:`wavestack.drivers.mdt693b.protocol`, the command exchanges
+run on a :class:`~wavestack.drivers.mdt693b.line.ControllerLine` and the voltage limits are combined
+by :mod:`wavestack.drivers.mdt693b.limits`; this module knows what to ask, enforces the limits and
+handles the errors.
 
 On :meth:`MDT693B.open` the driver sends ``echo=0`` (the echo doubles the traffic and would need a
 second parse path; whichever prompt, ``>`` or ``*``, ends that reply is the device's prompt from then
@@ -12,6 +13,17 @@ on), then reads ``id?``, ``vlimit?`` and ``<axis>min?``/``<axis>max?`` for every
 After a :class:`ProtocolError` or :class:`DeviceTimeout` the next command first resynchronises:
 it flushes the input, sends ``echo=0`` again, waits for the prompt and for the line to fall quiet.
 That also recovers a controller that was power-cycled (echo back on) behind the driver's back.
+
+MDT693A command set. A B unit whose MDT693A compatibility mode is on (``cm=1``, kept by the
+controller and left on by other host software), and a real MDT693A, speak the older single-letter
+commands (:mod:`~wavestack.drivers.mdt693b.command_sets`). With ``command_set="auto"`` (the
+default) the driver finds out at open, since only the controller knows its mode: a unit that
+answers ``echo=0`` with ``>`` speaks the B set, one that answers ``!`` (unknown command) the A set,
+and after ``*`` (the prompt of B firmware 1.05 and of the A set) ``cm?`` decides. ``"mdt693a"``
+never sends a B command (for a real MDT693A, whose reaction to one is not documented);
+``"mdt693b"`` refuses a unit in compatibility mode. In the A set the echo is not switched off but
+accepted, and the resynchronisation sends the harmless ``%`` instead of ``echo=0``.
+:meth:`MDT693B.set_compatibility_mode` switches a B unit and reads everything again.
 """
 
 from __future__ import annotations
@@ -19,35 +31,34 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass
 from types import TracebackType
 
-import serial
-
 from wavestack.drivers._checks import is_finite_real
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, LimitError, ProtocolError
+from wavestack.drivers.mdt693b.command_sets import (
+    A_COMMANDS,
+    B_COMMANDS,
+    COMMAND_SETS,
+    command_set_after_probe,
+    encode_compatibility_mode,
+)
 from wavestack.drivers.mdt693b.limits import AxisLimits, _effective_limits, _on_wire
+from wavestack.drivers.mdt693b.line import ControllerLine
 from wavestack.drivers.mdt693b.protocol import (
     AXES,
     PROMPTS,
     DeviceIdentity,
-    Reply,
     encode_command,
-    encode_set_voltage,
     parse_id,
-    parse_number,
     parse_vlimit,
-    split_reply,
 )
 
 __all__ = ["MDT693B", "AxisLimits", "VoltageReading"]
 
 logger = logging.getLogger(__name__)
 
-_POLL_S = 0.02  # serial read timeout: how often a waiting exchange checks its deadline
-_QUIET_S = 0.05  # resync: the line counts as quiet after this long without a byte
 _HARDWARE_MAX_V = 150.0
 
 
@@ -93,6 +104,9 @@ class MDT693B:
         Largest accepted |read-back - command|, V (the controller resolves ~0.1-0.2 V).
     timeout_s
         Per-exchange timeout used by :meth:`open`, s.
+    command_set
+        ``"auto"`` (detect at open), ``"mdt693b"`` or ``"mdt693a"`` (the MDT693A command set of an
+        MDT693A or of a B unit in compatibility mode); see the module docstring.
 
     Notes
     -----
@@ -109,6 +123,7 @@ class MDT693B:
         software_max_v: float = _HARDWARE_MAX_V,
         readback_tolerance_v: float = 0.5,
         timeout_s: float = 1.0,
+        command_set: str = "auto",
     ) -> None:
         axes = tuple(axes)
         if not axes or len(set(axes)) != len(axes) or not set(axes) <= set(AXES):
@@ -116,6 +131,8 @@ class MDT693B:
         if not 0.0 <= software_min_v < software_max_v <= _HARDWARE_MAX_V:
             raise ValueError(f"expected 0 <= software_min_v < software_max_v <= 150 V, "
                              f"got {software_min_v!r}, {software_max_v!r}")
+        if command_set != "auto" and command_set not in COMMAND_SETS:
+            raise ValueError(f"command_set must be 'auto', 'mdt693b' or 'mdt693a', got {command_set!r}")
         if not readback_tolerance_v > 0 or not timeout_s > 0:
             raise ValueError(f"readback_tolerance_v and timeout_s must be > 0, "
                              f"got {readback_tolerance_v!r}, {timeout_s!r}")
@@ -125,11 +142,9 @@ class MDT693B:
         self.software_max_v = float(software_max_v)
         self.readback_tolerance_v = float(readback_tolerance_v)
         self.timeout_s = float(timeout_s)
+        self.configured_command_set = command_set
         self._lock = threading.RLock()
-        self._port: serial.SerialBase | None = None
-        self._lost: str | None = None
-        self._needs_resync = False
-        self._prompt = PROMPTS
+        self._line = ControllerLine(url, lambda: self.name)
         self._identity: DeviceIdentity | None = None
         self._vlimit_v = _HARDWARE_MAX_V
         self._limits: dict[str, AxisLimits] = {}
@@ -144,7 +159,7 @@ class MDT693B:
     @property
     def is_open(self) -> bool:
         """True between a successful :meth:`open` and :meth:`close` or a lost connection."""
-        return self._port is not None
+        return self._line.is_open
 
     def open(self, timeout_s: float | None = None) -> None:
         """Open the port, switch echo off, detect the prompt and read identity and limits.
@@ -166,32 +181,23 @@ class MDT693B:
         """
         timeout = self.timeout_s if timeout_s is None else timeout_s
         with self._lock:
-            if self._port is not None:
+            if self._line.is_open:
                 return
             self._identity = None
+            self._line.open(timeout)
             try:
-                port = serial.serial_for_url(self.url, baudrate=115200, bytesize=8, parity="N", stopbits=1,
-                                             timeout=_POLL_S, write_timeout=timeout)
-            except ValueError as error:
-                raise ValueError(f"{self.name}: cannot open {self.url!r} ({error}); for sim:// URLs call "
-                                 "wavestack.simulators.serial_registry.register_serial_simulators() first") from None
-            except (serial.SerialException, OSError) as error:
-                raise DeviceDisconnected(self.name, f"cannot open the port ({error})") from error
-            self._port, self._lost, self._needs_resync, self._prompt = port, None, False, PROMPTS
-            try:
-                self._handshake(timeout)
+                self._handshake(timeout, self.configured_command_set)
             except BaseException:
-                self._close_port()
+                self._line.close(forget_loss=False)
                 raise
-            logger.info("%s open: firmware %s, limit switch %.0f V, limits %s", self.name,
-                        self._identity.firmware if self._identity else "?", self._vlimit_v,
+            logger.info("%s open: %s command set, firmware %s, limit switch %.0f V, limits %s", self.name,
+                        self._line.commands.name, self._identity.firmware if self._identity else "?", self._vlimit_v,
                         {axis: (lim.min_v, lim.max_v) for axis, lim in self._limits.items()})
 
     def close(self) -> None:
         """Close the port; idempotent. Outputs stay where they are."""
         with self._lock:
-            self._close_port()
-            self._lost = None
+            self._line.close()
 
     def __enter__(self) -> MDT693B:
         self.open()
@@ -206,16 +212,23 @@ class MDT693B:
     def identity(self) -> DeviceIdentity:
         """What ``id?`` reported at open; raises :class:`DeviceDisconnected` before."""
         with self._lock:
-            self._require_open()
+            self._line.require_open()
             if self._identity is None:  # unreachable: open() fails without an identity
                 raise DeviceDisconnected(self.name, "no identity; call open() again")
             return self._identity
 
     @property
+    def command_set(self) -> str:
+        """The command set in use: ``"mdt693b"`` or ``"mdt693a"`` (as detected or configured at open)."""
+        with self._lock:
+            self._line.require_open()
+            return self._line.commands.name
+
+    @property
     def vlimit_v(self) -> float:
         """Front-panel limit switch as read at open (or the last limit refresh), V."""
         with self._lock:
-            self._require_open()
+            self._line.require_open()
             return self._vlimit_v
 
     def limits(self, axis: str) -> AxisLimits:
@@ -230,7 +243,7 @@ class MDT693B:
         """
         self._check_axis(axis)
         with self._lock:
-            self._require_open()
+            self._line.require_open()
             return self._limits[axis]
 
     def read_voltage(self, axis: str, *, timeout_s: float) -> float:
@@ -245,7 +258,7 @@ class MDT693B:
         """
         self._check_axis(axis)
         with self._lock:
-            return self._query_number(f"{axis}voltage?", time.monotonic() + timeout_s)
+            return self._line.query_number(self._line.commands.voltage_query(axis), time.monotonic() + timeout_s)
 
     # ----------------------------------------------------------------------------- commands
     def set_voltage(self, axis: str, volts: float, *, timeout_s: float, clamp: bool = False) -> VoltageReading:
@@ -285,7 +298,7 @@ class MDT693B:
             raise ValueError(f"{self.name}: voltage must be a finite number, got {volts!r}")
         deadline = time.monotonic() + timeout_s
         with self._lock:
-            self._require_open()
+            self._line.require_open()
             limits = self._limits[axis]
             requested = float(volts)
             commanded = _on_wire(requested, limits)
@@ -296,9 +309,9 @@ class MDT693B:
                                      f"{self.software_max_v:g}], device [{limits.device_min_v:g}, "
                                      f"{limits.device_max_v:g}], limit switch {limits.vlimit_v:g} V); nothing sent")
                 commanded = _on_wire(limits.clamp(requested), limits)
-            with self._guard(deadline):
-                self._exchange(encode_set_voltage(axis, commanded), expect_body=False, deadline=deadline)
-            readback = self._query_number(f"{axis}voltage?", deadline)
+            with self._line.guard(deadline):
+                self._line.exchange(self._line.commands.set_voltage(axis, commanded), expect_body=False, deadline=deadline)
+            readback = self._line.query_number(self._line.commands.voltage_query(axis), deadline)
             if abs(readback - commanded) > self.readback_tolerance_v:
                 try:
                     self._refresh_limits(time.monotonic() + self.timeout_s)
@@ -310,29 +323,63 @@ class MDT693B:
             logger.debug("%s: %s -> %.2f V (read back %.2f V)", self.name, axis, commanded, readback)
             return VoltageReading(axis, requested, commanded, readback, not limits.contains(requested))
 
+    def set_compatibility_mode(self, on: bool, *, timeout_s: float) -> None:
+        """Switch a B unit's MDT693A compatibility mode (``cm=1`` / ``cm=0``), then read everything again.
+
+        From then on the driver speaks the command set of the new mode (whatever ``command_set``
+        said at construction). Outputs are not touched.
+
+        Parameters
+        ----------
+        on
+            True: the MDT693A command set; False: the unit's own.
+        timeout_s
+            Budget for the switch, s; the identity and limits are read again within ``timeout_s`` each.
+
+        Raises
+        ------
+        ProtocolError
+            The controller refused ``cm=`` (an MDT693A has no compatibility mode) or does not speak
+            the requested command set afterwards.
+        DeviceTimeout, DeviceDisconnected
+            As for every exchange.
+        """
+        wanted = A_COMMANDS if on else B_COMMANDS
+        with self._lock:
+            deadline = time.monotonic() + timeout_s
+            with self._line.guard(deadline):  # the reply may end in either mode's prompt
+                self._line.exchange(encode_compatibility_mode(on), expect_body=False, deadline=deadline,
+                                    prompts=PROMPTS)
+            self.configured_command_set = wanted.name
+            try:
+                self._handshake(timeout_s, wanted.name)
+            except (ProtocolError, DeviceTimeout):
+                self._line.needs_resync = True
+                raise
+            logger.info("%s: MDT693A compatibility mode %s", self.name, "on" if on else "off")
+
     # ----------------------------------------------------------------------------- internals
     def _check_axis(self, axis: str) -> None:
         if axis not in self.axes:
             raise ValueError(f"{self.name}: axis must be one of the configured {self.axes}, got {axis!r}")
 
-    def _require_open(self) -> serial.SerialBase:
-        if self._lost is not None:
-            raise DeviceDisconnected(self.name, f"connection lost earlier ({self._lost}); call open() again")
-        if self._port is None:
-            raise DeviceDisconnected(self.name, "port is not open; call open() first")
-        return self._port
-
-    def _close_port(self) -> None:
-        port, self._port = self._port, None
-        if port is not None:
-            try:
-                port.close()
-            except (serial.SerialException, OSError) as error:
-                logger.debug("%s: error while closing (%s)", self.name, error)
-
-    def _handshake(self, timeout_s: float) -> None:
-        self._resync(time.monotonic() + timeout_s)
-        body = self._command("id?", expect_body=True, deadline=time.monotonic() + timeout_s).body
+    def _handshake(self, timeout_s: float, command_set: str) -> None:
+        """Synchronise, settle the command set (detect it for ``"auto"``), read identity and limits."""
+        deadline = time.monotonic() + timeout_s
+        if command_set != "auto":
+            self._line.commands = COMMAND_SETS[command_set]
+            self._line.resync(deadline)
+        else:
+            self._line.commands = B_COMMANDS
+            probe = self._line.resync(deadline, probing=True)
+            name = command_set_after_probe(probe, None)
+            if name is None:
+                answer = self._line.exchange(encode_command("cm?"), expect_body=True, deadline=deadline,
+                                             prompts=PROMPTS, allow_error=True)
+                name = command_set_after_probe(probe, answer)
+            self._line.commands = COMMAND_SETS[name]
+        commands = self._line.commands
+        body = self._line.command(commands.id_query, expect_body=True, deadline=time.monotonic() + timeout_s).body
         self._identity = identity = parse_id(body, device=self.name)
         missing = [axis for axis in self.axes if axis not in identity.axes]
         if missing:
@@ -342,82 +389,15 @@ class MDT693B:
 
     def _refresh_limits(self, deadline: float) -> None:
         """Read ``vlimit?`` and each axis's min/max; recompute the effective limits."""
-        with self._guard(deadline):
-            vlimit = parse_vlimit(self._command("vlimit?", expect_body=True, deadline=deadline).body,
+        with self._line.guard(deadline):
+            commands = self._line.commands
+            vlimit = parse_vlimit(self._line.command(commands.vlimit_query, expect_body=True, deadline=deadline).body,
                                   device=self.name)
             limits = {}
             for axis in self.axes:
-                device_min = self._query_number(f"{axis}min?", deadline)
-                device_max = self._query_number(f"{axis}max?", deadline)
+                device_min = self._line.query_number(commands.min_query(axis), deadline)
+                device_max = self._line.query_number(commands.max_query(axis), deadline)
                 limits[axis] = _effective_limits(self.name, axis, software_min_v=self.software_min_v,
                                                  software_max_v=self.software_max_v, device_min_v=device_min,
                                                  device_max_v=device_max, vlimit_v=vlimit)
         self._vlimit_v, self._limits = vlimit, limits
-
-    def _query_number(self, command: str, deadline: float) -> float:
-        with self._guard(deadline):
-            return parse_number(self._command(command, expect_body=True, deadline=deadline).body, device=self.name)
-
-    def _command(self, command: str, *, expect_body: bool, deadline: float) -> Reply:
-        with self._guard(deadline):
-            return self._exchange(encode_command(command), expect_body=expect_body, deadline=deadline)
-
-    @contextmanager
-    def _guard(self, deadline: float) -> Iterator[None]:
-        """Resync first if due (within ``deadline``); flag a resync after a garbled or missing reply."""
-        self._require_open()
-        try:
-            if self._needs_resync:
-                self._resync(deadline)
-            yield
-        except (ProtocolError, DeviceTimeout):
-            self._needs_resync = True
-            raise
-
-    @contextmanager
-    def _port_io(self, during: str) -> Iterator[serial.SerialBase]:
-        """The open port; serial failures become DeviceTimeout (write) or DeviceDisconnected (sticky)."""
-        port = self._require_open()
-        try:
-            yield port
-        except DeviceError:  # DeviceTimeout and DeviceDisconnected are OSErrors too: pass them through
-            raise
-        except serial.SerialTimeoutException as error:
-            raise DeviceTimeout(self.name, f"writing {during} did not finish ({error})") from error
-        except (serial.SerialException, OSError) as error:
-            self._lost = f"{type(error).__name__}: {error}"
-            self._close_port()
-            raise DeviceDisconnected(self.name, f"serial port failed during {during} ({error})") from error
-
-    def _exchange(self, data: bytes, *, expect_body: bool, deadline: float, prompts: bytes | None = None) -> Reply:
-        """Write one command and read its reply until the prompt (caller holds the lock)."""
-        command = data.rstrip(b"\r").decode("ascii")
-        with self._port_io(repr(command)) as port:
-            port.reset_input_buffer()
-            port.write(data)
-            buffer = b""
-            while True:
-                reply, _rest = split_reply(buffer, echo_of=None, expect_body=expect_body,
-                                           prompts=prompts or self._prompt, device=self.name)
-                if reply is not None:
-                    break
-                if time.monotonic() >= deadline:
-                    raise DeviceTimeout(self.name, f"no complete reply to {command!r} before the deadline "
-                                        f"(expected a reply ending in {self._prompt.decode()!r}, got {buffer[-40:]!r})")
-                buffer += port.read(max(1, port.in_waiting))
-        if reply.error is not None:
-            raise ProtocolError(self.name, f"controller rejected {command!r}: {reply.error}")
-        return reply
-
-    def _resync(self, deadline: float) -> None:
-        """Flush, send ``echo=0``, wait for a prompt and for the line to fall quiet."""
-        reply = self._exchange(encode_command("echo=0"), expect_body=False, deadline=deadline, prompts=PROMPTS)
-        self._prompt = reply.prompt.encode()
-        with self._port_io("resynchronisation") as port:
-            quiet_since = time.monotonic()
-            while time.monotonic() - quiet_since < _QUIET_S and time.monotonic() < deadline:
-                if port.read(max(1, port.in_waiting)):
-                    quiet_since = time.monotonic()
-            port.reset_input_buffer()
-        self._needs_resync = False
-        logger.debug("%s: synchronised, prompt %r", self.name, self._prompt)

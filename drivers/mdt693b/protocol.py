@@ -57,7 +57,7 @@ VLIMIT_SETTINGS_V = (75.0, 100.0, 150.0)
 MAX_REPLY_BYTES = 4096
 
 _DEFAULT_DEVICE = "MDT693B"
-_COMMAND = re.compile(r"^[A-Za-z?][A-Za-z0-9?=.,+\- ]*$")
+_COMMAND = re.compile(r"^[A-Za-z?%][A-Za-z0-9?=.,+\- ]*$")
 _NUMBER = re.compile(r"^\s*(?:\[\s*(?P<bracketed>[^\[\]]*?)\s*\]|(?P<bare>[^\[\]]*?))\s*$")
 _FLOAT = re.compile(r"^[+-]?(?:\d+(?:\.\d*)?|\.\d+)$")
 _LINE_BREAKS = b"\r\n"
@@ -135,7 +135,8 @@ def encode_command(command: str) -> bytes:
     Raises
     ------
     ValueError
-        Empty, non-ASCII, or containing characters the protocol reserves (CR, LF, ``>``, ``*``, ``!``).
+        Empty, non-ASCII, or containing characters the protocol reserves (CR, LF, ``>``, ``*``, ``!``);
+        ``%`` only as the first character (the MDT693A's limit switch query).
     """
     if not isinstance(command, str) or not _COMMAND.match(command):
         raise ValueError(f"not an MDT693B command: {command!r} (expected printable ASCII such as 'xvoltage?')")
@@ -189,6 +190,7 @@ def split_reply(
     expect_body: bool,
     prompts: bytes = PROMPTS,
     device: str = _DEFAULT_DEVICE,
+    echo_optional: bool = False,
 ) -> tuple[Reply | None, bytes]:
     """Cut the first complete reply off a received byte stream.
 
@@ -205,6 +207,10 @@ def split_reply(
         Characters accepted as the prompt (the detected one, or :data:`PROMPTS` while detecting).
     device
         Name used in error messages.
+    echo_optional
+        True: the echo of ``echo_of`` (followed by CR) may come first or not at all, and is compared
+        without regard to case (the MDT693A echoes in lower case). Used in the MDT693A command set,
+        where the driver does not switch the echo off.
 
     Returns
     -------
@@ -219,12 +225,14 @@ def split_reply(
     """
     position = 0
     if echo_of is not None:
-        head = buffer[: len(echo_of)]
-        if not echo_of.startswith(head):
+        expected = echo_of + TERMINATOR if echo_optional else echo_of
+        head = buffer[: len(expected)]
+        if (expected.lower() if echo_optional else expected).startswith(head.lower() if echo_optional else head):
+            if len(head) < len(expected):
+                return None, buffer
+            position = len(expected)
+        elif not echo_optional:
             raise ProtocolError(device, f"expected the echo {echo_of!r}, got {bytes(head)!r}")
-        if len(head) < len(echo_of):
-            return None, buffer
-        position = len(echo_of)
     skip = _LINE_BREAKS + b" " + (prompts if expect_body else b"")
     while position < len(buffer) and buffer[position] in skip:
         position += 1

@@ -31,7 +31,8 @@ from wavestack.drivers.u3v import bootstrap as bs
 from wavestack.drivers.u3v.acquisition import StreamReader, U3VCounters, enable_stream
 from wavestack.drivers.u3v.connection import (CONTROL_PROTOCOL, STREAM_PROTOCOL, U3V_CLASS, U3V_SUBCLASS, Link,
                                               attach, find_device, release)
-from wavestack.drivers.u3v.feature_io import read_feature, write_feature
+from wavestack.drivers.u3v.feature_io import (lock_transport_layer, read_feature, unlock_transport_layer,
+                                              write_feature)
 from wavestack.drivers.u3v.genicam import Feature, FeatureMap
 from wavestack.drivers.u3v.stream import BlockAssembler, pixel_format_code
 
@@ -142,11 +143,11 @@ class U3VCamera:
         check_timeout(timeout)
         return time.monotonic() + timeout
 
-    def _read_feature(self, name: str, deadline: float) -> int | float:
+    def _read_feature(self, name: str, deadline: float) -> int | float | str:
         link = self._live()
         return read_feature(link.control, link.features.require(name, self._name), deadline, self._name)
 
-    def _write_feature(self, feature: Feature, value: int | float, deadline: float) -> None:
+    def _write_feature(self, feature: Feature, value: int | float | str, deadline: float) -> None:
         write_feature(self._live().control, feature, value, deadline, self._name)
 
     def _feature(self, name: str) -> Feature:
@@ -245,6 +246,36 @@ class U3VCamera:
             raise ProtocolError(self._name, f"TriggerMode lacks entry {entry!r}; has {sorted(feature.entries)}")
         self._write_feature(feature, feature.entries[entry], deadline)
 
+    def read_feature(self, name: str, timeout_s: float | None = None) -> int | float | str:
+        """Read any feature the driver resolved from the XML (see :attr:`features`), e.g. ``PayloadSize``.
+
+        Returns
+        -------
+        int, float or str
+            Integers and enumeration values as int, floats as float, strings (``DeviceVendorName``,
+            ``DeviceUserID``, ...) as text.
+
+        Raises
+        ------
+        ProtocolError
+            The XML does not describe ``name`` (or not within the supported subset), or it is
+            write-only, or the device refused the read.
+        """
+        return self._read_feature(name, self._deadline(timeout_s))
+
+    def set_device_user_id(self, name: str, timeout_s: float) -> None:
+        """Write ``DeviceUserID``, the user-chosen name the camera keeps (SFNC Device Control).
+
+        Raises
+        ------
+        ValueError
+            Not ASCII, or longer than the register (nothing sent).
+        ProtocolError
+            The device's XML has no writable ``DeviceUserID``, or the device refused it.
+        """
+        deadline = self._deadline(timeout_s)
+        self._write_feature(self._feature("DeviceUserID"), name, deadline)
+
     def trigger_software(self, timeout_s: float) -> None:
         """Execute TriggerSoftware (one frame when the trigger mode is on)."""
         self._execute("TriggerSoftware", self._deadline(timeout_s))
@@ -257,7 +288,11 @@ class U3VCamera:
 
     # --------------------------------------------------------------------------------- streaming
     def start(self, timeout_s: float | None = None) -> None:
-        """Configure the SIRM transfer sizes, enable the stream, AcquisitionStart, start the reader.
+        """Lock the transport layer, configure the SIRM transfer sizes, enable the stream, AcquisitionStart,
+        start the reader.
+
+        As a GenTL producer does (SFNC), ``AcquisitionMode`` is set to ``Continuous`` and
+        ``TLParamsLocked`` to 1 first, when the device describes them; :meth:`stop` clears the lock.
 
         Frames pending from an earlier acquisition are dropped (counted). Idempotent while running.
         """
@@ -265,11 +300,16 @@ class U3VCamera:
         link = self._live()
         if self._reader is not None:
             return
-        sirm, sizes = enable_stream(link.control, link.sbrm.sirm_address, deadline, self._name)
-        if self._ring.closed:  # the last reader gave up after repeated stream errors: start afresh
-            self._ring = FrameRing(self._ring_capacity, self._ring_policy, name=self._name)
-        self._ring.discard_pending()
-        self._execute("AcquisitionStart", deadline)
+        lock_transport_layer(link.control, link.features, deadline, self._name)
+        try:
+            sirm, sizes = enable_stream(link.control, link.sbrm.sirm_address, deadline, self._name)
+            if self._ring.closed:  # the last reader gave up after repeated stream errors: start afresh
+                self._ring = FrameRing(self._ring_capacity, self._ring_policy, name=self._name)
+            self._ring.discard_pending()
+            self._execute("AcquisitionStart", deadline)
+        except DeviceError:
+            unlock_transport_layer(link.control, link.features, deadline, self._name)
+            raise
         self._acquiring = True
         assembler = BlockAssembler(sizes, sirm.required_payload_size, self._name)
         self._reader = StreamReader(link.dev, link.stream_ep, assembler, self._ring, self._name, self._count,
@@ -286,8 +326,11 @@ class U3VCamera:
         DeviceTimeout
             No frame within ``timeout_s`` (e.g. waiting for a trigger, or not started).
         DeviceDisconnected
-            The camera was unplugged (after the pending frames are read) or closed.
+            The camera was unplugged (after the pending frames are read) or closed (at once:
+            closing is final, frames still pending are not delivered).
         """
+        if self._closed:
+            raise DeviceDisconnected(self._name, "camera closed")
         return self._ring.get(timeout_s)
 
     def counters(self) -> U3VCounters:
@@ -307,7 +350,8 @@ class U3VCamera:
             reader.join()
 
     def stop(self, timeout_s: float | None = None) -> None:
-        """AcquisitionStop, stop and join the reader thread, disable the stream. Idempotent.
+        """AcquisitionStop, stop and join the reader thread, disable the stream, clear TLParamsLocked.
+        Idempotent.
 
         After an unplug only the thread is joined. Pending frames stay readable.
 
@@ -334,6 +378,7 @@ class U3VCamera:
                                          deadline, "SIRM stream disable")
             except DeviceError as exc:
                 failure = failure or exc
+            unlock_transport_layer(self._link.control, self._link.features, deadline, self._name)
         if failure is not None and not isinstance(failure, DeviceDisconnected):
             raise failure
 

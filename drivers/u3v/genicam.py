@@ -14,19 +14,28 @@ naming the feature):
   ``Length`` 4 or 8, ``AccessMode`` RO/RW/WO (default RO), ``Endianess`` LittleEndian (default),
   ``Sign`` Unsigned (default).
 * ``FloatReg``: as ``IntReg`` without ``Sign``; ``Length`` 4 (float32) or 8 (float64).
+* ``StringReg`` as the feature itself (how the SFNC Device Control strings, ``DeviceVendorName`` and
+  the like, are described): one constant ``Address``, ``Length`` 1..4096, ``AccessMode``; the value is
+  ASCII, NUL-padded.
+
+Features in :data:`OPTIONAL_FEATURES` (the SFNC identity strings, ``AcquisitionMode``,
+``PayloadSize``, ``TLParamsLocked``) are read when the device describes them within the subset and
+left out otherwise: a camera that builds them from nodes outside the subset still opens.
 
 Presentation elements (``ToolTip``, ``DisplayName``, ``Visibility``, ``pInvalidator``, ...) are
 ignored. Integers are decimal or ``0x`` hexadecimal. The XML comes as plain bytes or as a ZIP
 holding exactly one ``.xml`` file. Documents with a DTD are refused (``xml.etree`` never fetches
 external entities; refusing DTDs also rules out entity expansion).
 
-Reference: EMVA GenICam Standard, GenApi schema 1.1 (node types IntReg, FloatReg, Integer, Float,
-Enumeration, Command).
+Reference: EMVA GenICam Standard, GenApi schema 1.1 (node types IntReg, FloatReg, StringReg,
+Integer, Float, Enumeration, Command); GenICam Standard Features Naming Convention (SFNC 2.6) for
+the feature names.
 """
 
 from __future__ import annotations
 
 import io
+import logging
 import xml.etree.ElementTree as ET
 import zipfile
 import zlib
@@ -37,14 +46,21 @@ from typing import Literal
 
 from wavestack.drivers.errors import ProtocolError
 
+logger = logging.getLogger(__name__)
+
 WANTED_FEATURES = ("Width", "Height", "PixelFormat", "ExposureTime", "TriggerMode", "TriggerSoftware",
                    "AcquisitionStart", "AcquisitionStop")
+#: SFNC features read when present and within the subset, left out otherwise.
+OPTIONAL_FEATURES = ("AcquisitionMode", "PayloadSize", "TLParamsLocked", "DeviceVendorName", "DeviceModelName",
+                     "DeviceFamilyName", "DeviceVersion", "DeviceManufacturerInfo", "DeviceSerialNumber",
+                     "DeviceUserID")
+_MAX_STRING_BYTES = 4096
 _GENAPI_NAMESPACE_PREFIX = "http://www.genicam.org/GenApi/"
 _MAX_XML_BYTES = 32 << 20  # a GenApi file is kilobytes to a few megabytes; refuse zip bombs
 _VALUE_ALTERNATIVES = ("Value", "pValueIndexed", "ValueIndexed", "pValueDefault", "pIndex", "pValueCopy")
 _ADDRESS_ALTERNATIVES = ("pAddress", "IntSwissKnife", "pIndex")
 
-FeatureKind = Literal["integer", "float", "enumeration", "command"]
+FeatureKind = Literal["integer", "float", "enumeration", "command", "string"]
 Access = Literal["RO", "RW", "WO"]
 
 
@@ -57,7 +73,7 @@ class Register:
     address
         Register address (u64).
     length
-        Bytes, 4 or 8.
+        Bytes, 4 or 8 (a string: 1..4096).
     access
         ``"RO"``, ``"RW"`` or ``"WO"``.
     is_float
@@ -87,7 +103,7 @@ class Feature:
     name
         Feature name, e.g. ``"ExposureTime"``.
     kind
-        ``"integer"``, ``"float"``, ``"enumeration"`` or ``"command"``.
+        ``"integer"``, ``"float"``, ``"enumeration"``, ``"command"`` or ``"string"``.
     register
         :class:`Register` holding the value.
     entries
@@ -302,9 +318,22 @@ class _Resolver:
             return None
         return _parse_float(self._one_text(feature, node, tag), f"{feature} {tag}", self._device)
 
+    def _string(self, feature: str, node: ET.Element) -> Feature:
+        self._refuse(feature, node, _ADDRESS_ALTERNATIVES)
+        address = _parse_int(self._one_text(feature, node, "Address"), f"{feature} Address", self._device)
+        length = _parse_int(self._one_text(feature, node, "Length"), f"{feature} Length", self._device)
+        access = self._one_text(feature, node, "AccessMode", default="RO")
+        if not 0 <= address <= 0xFFFF_FFFF_FFFF_FFFF or not 1 <= length <= _MAX_STRING_BYTES:
+            raise self._fail(feature, f"StringReg at {address} of {length} B; expected a u64 address, 1..4096 B")
+        if access not in ("RO", "RW", "WO"):
+            raise self._fail(feature, f"AccessMode {access!r}; expected RO, RW or WO")
+        return Feature(feature, "string", Register(address, length, access))  # type: ignore[arg-type]
+
     def resolve(self, feature: str) -> Feature:
         node = self._node(feature, feature)
         tag = _local(node.tag)
+        if tag == "StringReg":
+            return self._string(feature, node)
         if tag not in ("Integer", "Float", "Enumeration", "Command"):
             raise self._fail(feature, f"node type {tag!r} is outside the supported subset "
                                       f"(Integer, Float, Enumeration, Command)")
@@ -331,7 +360,8 @@ class _Resolver:
 
 
 def parse_genicam(data: bytes, device: str, *, zipped: bool | None = None,
-                  wanted: tuple[str, ...] = WANTED_FEATURES) -> FeatureMap:
+                  wanted: tuple[str, ...] = WANTED_FEATURES,
+                  optional: tuple[str, ...] = OPTIONAL_FEATURES) -> FeatureMap:
     """Parse a GenICam file into the wanted features' registers.
 
     Parameters
@@ -344,6 +374,8 @@ def parse_genicam(data: bytes, device: str, *, zipped: bool | None = None,
         From the manifest's file format (``None`` sniffs the ZIP signature).
     wanted
         Feature names to resolve; those the XML does not define are left out of the result.
+    optional
+        Feature names resolved like ``wanted`` but also left out (logged) when outside the subset.
 
     Returns
     -------
@@ -367,4 +399,11 @@ def parse_genicam(data: bytes, device: str, *, zipped: bool | None = None,
     if _local(tag) != "RegisterDescription" or (namespace and not namespace.startswith(_GENAPI_NAMESPACE_PREFIX)):
         raise ProtocolError(device, f"expected a GenApi <RegisterDescription> root, got {tag!r}")
     resolver = _Resolver(root, device)
-    return FeatureMap({name: resolver.resolve(name) for name in wanted if resolver.has(name)})
+    features = {name: resolver.resolve(name) for name in wanted if resolver.has(name)}
+    for name in optional:
+        if resolver.has(name) and name not in features:
+            try:
+                features[name] = resolver.resolve(name)
+            except ProtocolError as error:
+                logger.info("%s: optional feature %s left out (%s)", device, name, error)
+    return FeatureMap(features)

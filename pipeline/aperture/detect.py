@@ -5,8 +5,13 @@ halo and inside it small dark dropouts (dust, speckle) and possibly a real centr
 :func:`detect_aperture` turns the map into a validity mask in five steps and hands the mask to
 :meth:`Aperture.from_mask <wavestack.pipeline.aperture.region.Aperture.from_mask>`:
 
-1. threshold: valid where ``map > threshold`` (Otsu's threshold [1]_ unless one is given);
-   NaN pixels never pass;
+1. threshold: valid where ``map > threshold``; NaN pixels never pass. Unless a threshold is given,
+   it is the half-way level between the disk and the halo (:mod:`.levels`): a first pass at Otsu's
+   threshold [1]_ (steps 1-4) gives a coarse aperture, robust medians inside and outside it give
+   the two levels, and the map, smoothed by a Gaussian of ``smooth_sigma_px`` (which does not move
+   a half-way edge, but averages halo speckle touching the rim below it), is thresholded half way
+   between the disk level and the *local* halo level (a map: a halo touching the rim on one
+   side is brighter there, see :func:`~wavestack.pipeline.aperture.levels.local_threshold`);
 2. morphological opening, then closing, with elliptical kernels [2]_ (removes speckle, bridges
    one- or two-pixel gaps);
 3. 8-connected components [3]_: keep the largest, or all of at least ``min_component_px``;
@@ -38,6 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._checks import int_at_least, is_finite_real, real_at_least
+from .levels import ModulationLevels, local_threshold, modulation_levels, smoothed
 from .region import Aperture, EmptyAperture
 
 __all__ = ["DetectedAperture", "DetectionSettings", "detect_aperture"]
@@ -45,6 +51,7 @@ __all__ = ["DetectedAperture", "DetectionSettings", "detect_aperture"]
 logger = logging.getLogger(__name__)
 
 _KEEP_CHOICES = ("largest", "all")
+_RULES = ("midpoint", "otsu")
 
 
 @dataclass(frozen=True)
@@ -55,7 +62,18 @@ class DetectionSettings:
     ----------
     threshold : float or None
         Absolute threshold in map units: pixels with ``map > threshold`` are valid. None
-        (default) uses Otsu's threshold, see :func:`detect_aperture`.
+        (default) finds one by ``rule``, see :func:`detect_aperture`.
+    rule : {"midpoint", "otsu"}
+        With ``threshold=None``: ``"midpoint"`` (default) thresholds the smoothed map half way
+        between the disk's and the halo's levels (the edge of the optic, see :mod:`.levels`);
+        ``"otsu"`` stops at Otsu's threshold on the raw map (the detection before this rule).
+    smooth_sigma_px : float
+        Gaussian sigma, pixels, of the smoothing before the half-way threshold (``"midpoint"``
+        rule only); of the order of the speckle grain. 0 skips it. Default 1.5.
+    edge_margin_px : int
+        Distance from the coarse edge to the pixels the disk and halo levels are taken from
+        (``"midpoint"`` rule), at least the half-width of the map's edge response. Default 3
+        (a modulation map); a local-contrast map needs half its box plus that.
     open_radius_px : int
         Radius in pixels of the elliptical opening kernel (size ``2 r + 1``); removes bright
         speckle narrower than the kernel. 0 skips the opening. Default 2.
@@ -82,6 +100,9 @@ class DetectionSettings:
     fill_dropouts_below_px: int = 200
     keep: str = "largest"
     min_component_px: int = 500
+    rule: str = "midpoint"
+    smooth_sigma_px: float = 1.5
+    edge_margin_px: int = 3
 
     def __post_init__(self) -> None:
         if self.threshold is not None and not is_finite_real(self.threshold):
@@ -95,6 +116,10 @@ class DetectionSettings:
         int_at_least(self.min_component_px, "min_component_px", 1, voice="is")
         if self.keep not in _KEEP_CHOICES:
             raise ValueError(f"keep is {self.keep!r}; expected 'largest' or 'all'")
+        if self.rule not in _RULES:
+            raise ValueError(f"rule is {self.rule!r}; expected 'midpoint' or 'otsu'")
+        real_at_least(self.smooth_sigma_px, "smooth_sigma_px", 0.0, unit="pixels", voice="is")
+        int_at_least(self.edge_margin_px, "edge_margin_px", 1, voice="is")
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,17 +131,23 @@ class DetectedAperture:
     aperture : Aperture
         The detected aperture.
     threshold : float
-        The threshold applied, in map units (valid where ``map > threshold``).
+        The threshold applied, in map units (valid where ``map > threshold``); under the
+        ``"midpoint"`` rule the global half-way level, the local threshold map being half way
+        to the local halo level (equal to it where the halo is uniform).
     filled_dropouts : int
         Number of holes filled (smaller than ``fill_dropouts_below_px``).
     removed_components : int
         Number of 8-connected components dropped after the morphology (speckle, halo pieces).
+    levels : ModulationLevels or None
+        The disk and halo levels the half-way threshold came from (``"midpoint"`` rule), else
+        None.
     """
 
     aperture: Aperture
     threshold: float
     filled_dropouts: int
     removed_components: int
+    levels: ModulationLevels | None = None
 
 
 def detect_aperture(
@@ -127,12 +158,19 @@ def detect_aperture(
 ) -> DetectedAperture:
     """Detect the valid aperture (the bright pupil) in a modulation or intensity map.
 
-    With ``settings.threshold = None`` the threshold is Otsu's [1]_: the finite values are
+    With ``settings.threshold = None`` the first threshold is Otsu's [1]_: the finite values are
     rescaled linearly to 8 bits, ``q = round(255 (v - lo) / (hi - lo))`` with ``lo``, ``hi``
     their minimum and maximum, ``cv2.threshold(..., THRESH_OTSU)`` returns the level ``t``
     separating ``q <= t`` from ``q > t``, and the threshold in map units is the class boundary
     ``lo + (t + 0.5) (hi - lo) / 255``. Either way the mask is then ``map > threshold`` on the
-    original values, so the reported threshold is exactly the one applied.
+    original values. With the ``"midpoint"`` rule (default) that aperture is only a coarse one:
+    the disk and halo levels are the medians inside and outside it
+    (:func:`~wavestack.pipeline.aperture.levels.modulation_levels`) and steps 1-4 run again on
+    the map smoothed by ``settings.smooth_sigma_px`` at the half-way level, which is the
+    threshold reported. The edge is then the optic's own (the 50 % point of its edge
+    response) to within the pixel grid; sub-pixel edge points and a fitted circle are
+    :func:`~wavestack.pipeline.aperture.edge_circle.fit_edge_circle`. A map whose inside is not
+    above its outside keeps Otsu's aperture.
 
     Parameters
     ----------
@@ -173,10 +211,42 @@ def detect_aperture(
     real_at_least(min_hole_area_px, "min_hole_area_px", 0.0, unit="pixels", voice="is")
     values = _validated_map(signal_map)
     lo, hi, has_nan = _finite_range(values)
+    levels = None
     if settings.threshold is not None:
         threshold = float(settings.threshold)
+        mask, filled, removed = _clean_mask(values, threshold, settings)
     else:
         threshold = _otsu_threshold(values, lo, hi, has_nan)
+        mask, filled, removed = _clean_mask(values, threshold, settings)
+        if settings.rule == "midpoint":
+            margin = settings.edge_margin_px
+            levels = modulation_levels(values, mask, margin)
+            if levels.disk > levels.halo:
+                threshold = levels.midpoint
+                mask, filled, removed = _clean_mask(
+                    smoothed(values, settings.smooth_sigma_px),
+                    local_threshold(values, mask, levels, margin), settings,
+                )
+            else:  # no plateau above its surroundings: keep Otsu's answer
+                levels = None
+    aperture = Aperture.from_mask(mask.view(np.bool_), min_hole_area_px=min_hole_area_px)
+    logger.debug(
+        "aperture detected: threshold %.6g, %d components removed, %d dropouts filled; %s",
+        threshold,
+        removed,
+        filled,
+        aperture.describe(),
+    )
+    return DetectedAperture(aperture, threshold, filled, removed, levels)
+
+
+def _clean_mask(
+    values: NDArray[np.generic], threshold: float | NDArray[np.float32], settings: DetectionSettings
+) -> tuple[NDArray[np.uint8], int, int]:
+    """Steps 1-4: threshold (a level or a map of levels), open, close, select components, fill holes.
+
+    Returns the mask (uint8, 1 = valid), the holes filled and the components removed.
+    """
     mask = np.greater(values, threshold).view(np.uint8)
     if settings.open_radius_px:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _ellipse(settings.open_radius_px))
@@ -191,15 +261,7 @@ def detect_aperture(
     filled = _fill_small_holes(pupil, settings.fill_dropouts_below_px)
     mask = np.zeros(values.shape, dtype=np.uint8)
     mask[box][inner] = pupil
-    aperture = Aperture.from_mask(mask.view(np.bool_), min_hole_area_px=min_hole_area_px)
-    logger.debug(
-        "aperture detected: threshold %.6g, %d components removed, %d dropouts filled; %s",
-        threshold,
-        removed,
-        filled,
-        aperture.describe(),
-    )
-    return DetectedAperture(aperture, threshold, filled, removed)
+    return mask, filled, removed
 
 
 def _validated_map(signal_map: ArrayLike) -> NDArray[np.generic]:

@@ -1,6 +1,6 @@
 """A cheap per-frame check that the aperture has not moved, so full detection runs only on change.
 
-Full detection (:func:`~wavestack.pipeline.aperture.detect.detect_aperture`: Otsu, morphology,
+Full detection (:func:`~wavestack.pipeline.aperture.detect.detect_aperture`: half-way threshold, morphology,
 component labelling, holes, topology) costs tens of milliseconds at 1024 x 1024, more than the
 rest of a frame's work. While the aperture holds still that work is wasted: the station only
 needs to know *whether* the aperture changed. The watch answers that on a block-averaged copy:

@@ -5,8 +5,10 @@ One place strings the signal path together, for a phase-shifted set or a single 
 1. phase: temporal phase shifting (:mod:`wavestack.pipeline.phase.psi`) or the Fourier carrier method
    (:mod:`wavestack.pipeline.phase.carrier`), with the modulation map alongside;
 2. aperture: detected from the modulation (:mod:`wavestack.pipeline.aperture.detect`), so the
-   mirror is found inside its speckled halo; for a carrier frame from the local fringe contrast
-   (see :func:`local_fringe_contrast`);
+   mirror is found inside its speckled halo, its edge half way between the disk's and the halo's
+   modulation; for a carrier frame from the local fringe contrast (see
+   :func:`local_fringe_contrast`). Or, by ``aperture=``, the circle fitted to that edge (for a
+   round optic) or the user's mask (:func:`~wavestack.pipeline.aperture.choice.choose_aperture`);
 3. unwrapping on that aperture (:mod:`wavestack.pipeline.phase.spatial_unwrap`);
 4. units: waves (``phase / 2 pi``), and nanometres with the wavelength.
 
@@ -17,14 +19,15 @@ phi is a positive wavefront. Counter-clockwise steps (``direction="ccw"``) mean
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from ..aperture import Aperture, DetectionSettings, detect_aperture
+from ..aperture import Aperture, DetectionSettings, EdgeCircle, choose_aperture
 from .carrier import carrier_phase
 from .psi.algorithms import phase_from_frames
 from .spatial_unwrap import SpatialParams, unwrap_spatial
@@ -45,7 +48,7 @@ class MeasuredWavefront:
     waves : ndarray, shape (rows, cols)
         Wavefront in waves, NaN outside the aperture.
     aperture : Aperture
-        The detected (or given) aperture.
+        The aperture used (detected, fitted circle or given mask).
     method : str
         "lsq", "four", "hariharan", "aia", "pca", "carrier" or "file".
     steps_rad : ndarray or None
@@ -56,6 +59,11 @@ class MeasuredWavefront:
         Carrier frequency in cycles per pixel (x right, y up) for the carrier method.
     timings : dict
         Seconds per stage.
+    aperture_choice : str
+        ``"detected"``, ``"circle"``, ``"mask"`` (the user's) or ``"file"`` (a measured map).
+    edge : EdgeCircle or None
+        Circle fitted to the detected edge: centre, radius and their uncertainties in pixels
+        (None for a user mask, a measured map, or an edge no circle fits).
     """
 
     waves: NDArray[np.float64]
@@ -65,6 +73,8 @@ class MeasuredWavefront:
     modulation: NDArray[np.float64] | None = None
     carrier: tuple[float, float] | None = None
     timings: dict[str, float] = field(default_factory=dict)
+    aperture_choice: str = "detected"
+    edge: EdgeCircle | None = None
 
 
 def local_fringe_contrast(frame: NDArray, period_px: float) -> NDArray[np.float32]:
@@ -84,7 +94,7 @@ def local_fringe_contrast(frame: NDArray, period_px: float) -> NDArray[np.float3
     -------
     ndarray of float32, shape (rows, cols)
     """
-    size = max(3, int(round(2 * period_px)) | 1)
+    size = _contrast_box(period_px)
     # float32 throughout (counts up to 65535 square to < 2^32, well inside float32's range; the
     # variance's cancellation error is ~1e-7 of the mean square, far below any fringe contrast),
     # and OpenCV's box filter of squares: two passes instead of four float64 ones.
@@ -97,19 +107,29 @@ def local_fringe_contrast(frame: NDArray, period_px: float) -> NDArray[np.float3
     return np.sqrt(square, out=square)
 
 
+def _contrast_box(period_px: float) -> int:
+    """Side of the local-contrast box, pixels: about two periods, odd, at least 3."""
+    return max(3, int(round(2 * period_px)) | 1)
+
+
 def _finish(
     phase: NDArray[np.float64],
-    modulation: NDArray[np.float64],
+    signal: NDArray,
+    choice: str | ArrayLike,
     detection: DetectionSettings,
     timings: dict[str, float],
-) -> tuple[NDArray[np.float64], Aperture]:
+) -> dict:
+    """Aperture (by ``choice``) and unwrapped waves: the MeasuredWavefront fields they fill."""
     tick = time.perf_counter()
-    aperture = detect_aperture(modulation, detection).aperture
+    chosen = choose_aperture(signal, choice, detection)
     timings["aperture"] = time.perf_counter() - tick
     tick = time.perf_counter()
-    unwrapped = unwrap_spatial(phase, aperture.mask, _UNWRAP)
+    unwrapped = unwrap_spatial(phase, chosen.aperture.mask, _UNWRAP)
     timings["unwrap"] = time.perf_counter() - tick
-    return unwrapped / (2.0 * np.pi), aperture
+    return {
+        "waves": unwrapped / (2.0 * np.pi), "aperture": chosen.aperture,
+        "aperture_choice": chosen.choice, "edge": chosen.edge, "timings": timings,
+    }
 
 
 def wavefront_from_phase_shifts(
@@ -119,6 +139,7 @@ def wavefront_from_phase_shifts(
     steps_rad: NDArray[np.float64] | None = None,
     direction: str = "ccw",
     detection: DetectionSettings = DetectionSettings(),
+    aperture: str | ArrayLike = "detected",
 ) -> MeasuredWavefront:
     """Wavefront of a phase-shifted set of frames.
 
@@ -135,6 +156,8 @@ def wavefront_from_phase_shifts(
         Phase-step direction.
     detection : DetectionSettings
         How the aperture is found in the modulation map.
+    aperture : {"detected", "circle"} or array_like of bool, shape (rows, cols)
+        The detected aperture (any shape, default), the circle fitted to its edge, or a mask.
 
     Returns
     -------
@@ -147,14 +170,11 @@ def wavefront_from_phase_shifts(
         steps_rad = 2.0 * np.pi * np.arange(frames.shape[0]) / frames.shape[0]
     result = phase_from_frames(frames, method=method, steps=steps_rad, direction=direction)
     timings["phase"] = time.perf_counter() - tick
-    waves, aperture = _finish(result.phase, result.modulation, detection, timings)
     return MeasuredWavefront(
-        waves=waves,
-        aperture=aperture,
         method=result.method,
         steps_rad=np.asarray(result.steps),
         modulation=result.modulation,
-        timings=timings,
+        **_finish(result.phase, result.modulation, aperture, detection, timings),
     )
 
 
@@ -163,6 +183,7 @@ def wavefront_from_carrier(
     *,
     sign: int = 1,
     detection: DetectionSettings = DetectionSettings(),
+    aperture: str | ArrayLike = "detected",
 ) -> MeasuredWavefront:
     """Wavefront of a single frame with carrier (tilt) fringes, by the Fourier method.
 
@@ -173,6 +194,17 @@ def wavefront_from_carrier(
         A single carrier frame cannot tell phi from -phi without knowing the tilt's direction;
         -1 flips the result to match a setup whose tilt runs the other way.
     detection : DetectionSettings
+    aperture : {"detected", "circle"} or array_like of bool, shape (rows, cols)
+        As for :func:`wavefront_from_phase_shifts`, detected in the local fringe *variance*
+        (the square of :func:`local_fringe_contrast`). Why the variance: over a box straddling
+        a straight edge the variance is, to first order, the fringe-bearing fraction ``f`` of
+        the box times the disk's variance plus ``1 - f`` times the halo's (the cross term
+        ``f (1 - f) (A_in - A_out)^2`` is small where the mean intensities inside and outside
+        are close, as on the bundled frame: 114 against 108 counts, against a fringe variance
+        of ~2000), and ``f = 1/2`` at the edge for any box symmetric about it. So the half-way
+        level of the variance is at the edge whatever the box size, where the standard
+        deviation (``sqrt(f)``) reaches half way a quarter box outside it, which is why the
+        contrast-detected aperture used to be eroded by half a box.
 
     Returns
     -------
@@ -188,20 +220,13 @@ def wavefront_from_carrier(
     result = carrier_phase(np.asarray(frame), sign=sign)
     timings["phase"] = time.perf_counter() - tick
     period = 1.0 / float(np.hypot(*result.carrier))
-    contrast = local_fringe_contrast(frame, period)
-    tick = time.perf_counter()
-    found = detect_aperture(contrast, detection).aperture
-    # the box of two periods spreads the contrast edge outward by half a box: take it back
-    aperture = found.eroded(int(round(period)))
-    timings["aperture"] = time.perf_counter() - tick
-    tick = time.perf_counter()
-    waves = unwrap_spatial(result.phase, aperture.mask, _UNWRAP) / (2.0 * np.pi)
-    timings["unwrap"] = time.perf_counter() - tick
+    variance = np.square(local_fringe_contrast(frame, period))
+    # the box's edge response is as wide as the box: the levels are taken beyond half of it
+    margin = max(detection.edge_margin_px, _contrast_box(period) // 2 + 3)
+    detection = dataclasses.replace(detection, edge_margin_px=margin)
     return MeasuredWavefront(
-        waves=waves,
-        aperture=aperture,
         method="carrier",
         modulation=result.modulation,
         carrier=tuple(result.carrier),
-        timings=timings,
+        **_finish(result.phase, variance, aperture, detection, timings),
     )

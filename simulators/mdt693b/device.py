@@ -20,6 +20,9 @@ Behaviour modelled (firmware 1.10 unless noted):
 * An unknown command answers ``CMD_NOT_DEFINED``, a malformed argument ``CMD_ARG_INVALID``, each
   followed directly by the prompt (firmware 1.10 sends ``CMD_NOT_DEFINED>``; the ``*`` personality
   uses the same text, for want of a record of that firmware).
+* ``cm?`` answers ``[MDT693A Compatibility Mode Off]`` (``MDT694A`` on the one-axis model); ``cm=1``
+  switches to the MDT693A command set (:mod:`~wavestack.simulators.mdt693b.compatibility`), whose
+  prompt ends that very answer. The ``MDT693A`` model speaks only that set.
 """
 
 from __future__ import annotations
@@ -29,99 +32,20 @@ import random
 import re
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Literal
+
+from wavestack.simulators.mdt693b.compatibility import MDT693ACommands, frame_mdt693a
+from wavestack.simulators.mdt693b.personality import AxisState, MDT693BFaults, MDT693BPersonality
 
 logger = logging.getLogger(__name__)
 
 VoltageListener = Callable[[str, float], None]
 
-_SWITCH_SETTINGS_V = (75.0, 100.0, 150.0)
 _ERRORS = ("CMD_NOT_DEFINED", "CMD_ARG_INVALID")
 _MAX_LINE = 256
 _SPLIT_DELAY_S = 0.01  # gap between the pieces of a split reply; well below any driver timeout
 
 
-@dataclass
-class MDT693BFaults:
-    """Fault switches of one simulated controller (flip them from a test; read on every byte).
-
-    Attributes
-    ----------
-    silent
-        The controller is hung: it reads commands but neither executes nor answers them.
-    garbage
-        Commands execute, but each reply is replaced by random non-ASCII bytes and the prompt.
-    split_replies
-        Replies arrive in three pieces ~10 ms apart (a USB-serial adapter flushing mid-reply).
-    unplugged
-        The cable is out: the transport raises or closes instead of delivering bytes.
-    """
-
-    silent: bool = False
-    garbage: bool = False
-    split_replies: bool = False
-    unplugged: bool = False
-
-
-@dataclass(frozen=True)
-class MDT693BPersonality:
-    """What distinguishes one controller (model, firmware, settings) from another.
-
-    Attributes
-    ----------
-    model
-        ``"MDT693B"`` (axes x, y, z) or ``"MDT694B"`` (axis x).
-    echo
-        Echo at power-on.
-    prompt
-        ``">"`` (firmware 1.10) or ``"*"`` (firmware 1.05).
-    firmware, serial_number, friendly_name
-        Reported by ``id?``.
-    vlimit_v
-        Front-panel limit switch at power-on: 75, 100 or 150 V.
-    decimals
-        Decimals of a voltage reply (2 on firmware 1.10, 1 on 1.05).
-    """
-
-    model: Literal["MDT693B", "MDT694B"] = "MDT693B"
-    echo: bool = True
-    prompt: Literal[">", "*"] = ">"
-    firmware: str = "1.10"
-    serial_number: str = "SIM-000001"
-    friendly_name: str = "simulated"
-    vlimit_v: float = 150.0
-    decimals: int = 2
-
-    def __post_init__(self) -> None:
-        if self.vlimit_v not in _SWITCH_SETTINGS_V:
-            raise ValueError(f"vlimit_v must be one of {_SWITCH_SETTINGS_V}, got {self.vlimit_v!r}")
-        if self.prompt not in (">", "*"):
-            raise ValueError(f"prompt must be '>' or '*', got {self.prompt!r}")
-        if self.model not in ("MDT693B", "MDT694B"):
-            raise ValueError(f"model must be 'MDT693B' or 'MDT694B', got {self.model!r}")
-
-    @property
-    def axes(self) -> tuple[str, ...]:
-        """Output axes of the model."""
-        return ("x", "y", "z") if self.model == "MDT693B" else ("x",)
-
-    def id_text(self) -> str:
-        """The ``id?`` reply body, lines separated by CR."""
-        lines = [f"Model {self.model} Piezo Control Module", f"Firmware Version: {self.firmware}",
-                 "Voltage Range: 0V to 150V", f"Serial#:{self.serial_number}",
-                 f"Friendly Name:{self.friendly_name}", "Thorlabs, Inc. Newton, NJ 07860", "www.thorlabs.com", ""]
-        return "\r".join(lines)
-
-
-@dataclass
-class _Axis:
-    volts: float = 0.0
-    min_v: float = 0.0
-    max_v: float = 150.0
-
-
-class MDT693BDevice:
+class MDT693BDevice(MDT693ACommands):
     """State machine of one simulated MDT693B / MDT694B.
 
     Parameters
@@ -149,7 +73,8 @@ class MDT693BDevice:
         self.on_voltage_change = on_voltage_change
         self.vlimit_v = self.personality.vlimit_v
         self._echo = self.personality.echo
-        self._axes = {name: _Axis() for name in self.personality.axes}
+        self._compatibility = self.personality.compatibility_mode or self.personality.model == "MDT693A"
+        self._axes = {name: AxisState() for name in self.personality.axes}
         self._line = bytearray()
         self._received = bytearray()
         self._commands: list[str] = []
@@ -169,6 +94,12 @@ class MDT693BDevice:
         with self._lock:
             state = self._axis(axis)
             state.min_v, state.max_v = float(min_v), float(max_v)
+
+    @property
+    def compatibility_mode(self) -> bool:
+        """True while the controller speaks the MDT693A command set."""
+        with self._lock:
+            return self._compatibility
 
     @property
     def echo(self) -> bool:
@@ -224,7 +155,7 @@ class MDT693BDevice:
         return ((0.0, reply[:cut1]), (_SPLIT_DELAY_S, reply[cut1:cut2]), (_SPLIT_DELAY_S, reply[cut2:]))
 
     # ------------------------------------------------------------------------------ internals
-    def _axis(self, axis: str) -> _Axis:
+    def _axis(self, axis: str) -> AxisState:
         try:
             return self._axes[axis]
         except KeyError:
@@ -235,12 +166,18 @@ class MDT693BDevice:
         self._commands.append(text)
         if self.faults.silent:
             return b""
+        if self._compatibility:
+            echo = line.lower() + b"\r" if self._echo else b""  # the MDT693A echoes in lower case
+            outcome = self._execute_mdt693a(text.strip().lower(), changes)
+            prompt = b"*" if self._compatibility else self.personality.prompt.encode()  # cm=0 switched it
+            if self.faults.garbage:
+                return echo + self._noise() + prompt
+            return echo + frame_mdt693a(outcome, prompt)
         echo = line + b"\r" if self._echo else b""
         body = self._execute(text.strip().lower(), changes)
-        prompt = self.personality.prompt.encode()
+        prompt = b"*" if self._compatibility else self.personality.prompt.encode()  # cm=1 switched it
         if self.faults.garbage:
-            noise = bytes(self._random.randrange(0x80, 0x100) for _ in range(self._random.randrange(4, 16)))
-            return echo + noise + prompt
+            return echo + self._noise() + prompt
         if body is None:
             return echo + prompt
         if body in _ERRORS:  # firmware 1.10 sends b"CMD_NOT_DEFINED>" without a line break
@@ -262,6 +199,13 @@ class MDT693BDevice:
             return self.personality.serial_number
         if command == "friendly?":
             return self.personality.friendly_name
+        if command == "cm?":
+            return f"[{self.personality.compatibility_model} Compatibility Mode Off]"
+        if command.startswith("cm="):
+            if command[3:].strip() not in ("0", "1"):
+                return "CMD_ARG_INVALID"
+            self._compatibility = command[3:].strip() == "1"
+            return None
         if command.startswith("echo="):
             value = command[5:].strip()
             if value not in ("0", "1"):
@@ -296,10 +240,8 @@ class MDT693BDevice:
             return "CMD_ARG_INVALID"
         if quantity == "voltage":
             self._set_output(axis, volts, changes)
-        elif quantity == "min":
-            state.min_v = min(volts, state.max_v)
         else:
-            state.max_v = max(volts, state.min_v)
+            state.set_limit("min" if quantity == "min" else "max", volts)
         return None
 
     def _set_output(self, axis: str, volts: float, changes: list[tuple[str, float]]) -> None:
@@ -312,6 +254,9 @@ class MDT693BDevice:
             state.volts = output
             changes.append((axis, output))
             logger.debug("simulated %s: %s axis -> %.3f V", self.personality.model, axis, output)
+
+    def _noise(self) -> bytes:
+        return bytes(self._random.randrange(0x80, 0x100) for _ in range(self._random.randrange(4, 16)))
 
     def _format_volts(self, volts: float) -> str:
         return f"{volts:6.{self.personality.decimals}f}"

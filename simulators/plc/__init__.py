@@ -2,6 +2,7 @@
 
 - :mod:`.server`: :class:`PlcSimulator`, the server thread (SimDevice/SimData), ground truth for tests.
 - :mod:`.program`: the PLC's rules (watchdog, command handshake, status, outputs) and register layout.
+- :mod:`.access`: which function code may reach which block; exception 1 or 2 for any other request.
 - :mod:`.watchdog`: the heartbeat watchdog state machine.
 - :mod:`.faults`: fault switches (drop, delay, truncate, corrupt replies; frozen echo; e-stop).
 - :mod:`.polishing`: the polishing-station model a removal command acts on.
@@ -9,6 +10,7 @@
 
 from __future__ import annotations
 
+from wavestack.simulators.plc.access import check_request, served_functions
 from wavestack.simulators.plc.faults import SimFaults
 from wavestack.simulators.plc.polishing import PolishingPass, PolishingStation, RemovalCommand
 from wavestack.simulators.plc.program import PlcSimLayout, PolishingPlcProgram, SimOutputs
@@ -27,4 +29,6 @@ __all__ = [
     "SimFaults",
     "SimOutputs",
     "WatchdogState",
+    "check_request",
+    "served_functions",
 ]

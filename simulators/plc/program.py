@@ -86,6 +86,11 @@ class PlcSimLayout:
         Heartbeat watchdog timeout, s.
     pass_duration_s
         Time one polishing pass keeps the PLC busy, s (0: a command completes at once).
+    read_function
+        Function code every block is read with: 3 (holding registers) or 4 (input registers).
+    single_write_function
+        Function code of the heartbeat and re-arm writes: 6, or 16 with one register. The command
+        block is always written with 16, whole (see :mod:`~wavestack.simulators.plc.access`).
     """
 
     unit_id: int
@@ -101,8 +106,14 @@ class PlcSimLayout:
     output_word_order: str
     watchdog_timeout_s: float
     pass_duration_s: float = 0.0
+    read_function: int = 3
+    single_write_function: int = 6
 
     def __post_init__(self) -> None:
+        if self.read_function not in (3, 4):
+            raise ValueError(f"read_function must be 3 or 4, got {self.read_function!r}")
+        if self.single_write_function not in (6, 16):
+            raise ValueError(f"single_write_function must be 6 or 16, got {self.single_write_function!r}")
         for order in (self.self_check_word_order, self.command_word_order, self.output_word_order):
             if order not in _ORDERS:
                 raise ValueError(f"unknown word order {order!r}; expected one of {_ORDERS}")

@@ -3,9 +3,12 @@
 The server is a thin shell around :class:`~wavestack.simulators.plc.program.PolishingPlcProgram`
 (the PLC's rules, re-implemented from the README's register map):
 
-- one ``SimDevice`` with a shared block of holding registers (FC3 and FC4 read the same memory);
-  addresses outside the map answer exception 2, and so do writes to read-only blocks (self-check
-  constant, status, outputs), through ``SimData(readonly=True)``;
+- one ``SimDevice`` with a block of registers; addresses outside the map answer exception 2, and so
+  do writes to read-only blocks (self-check constant, status, outputs), through
+  ``SimData(readonly=True)``;
+- the server answers exactly as the register map says (:mod:`~wavestack.simulators.plc.access`): a
+  function code the map never uses answers exception 1 when it is decoded, one the map uses for
+  other registers (FC6 into the command block, a partial command write) exception 2;
 - the device ``action`` runs the program for every request: watchdog (exception 4 when tripped),
   command handshake (exception 3 for refused parameters), status and outputs;
 - :class:`SimFaults` switches: drop, truncate or corrupt replies through pymodbus's
@@ -33,6 +36,7 @@ from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import SimDevice
 
+from wavestack.simulators.plc.access import check_request, refusing_request_classes
 from wavestack.simulators.plc.faults import SimFaults
 from wavestack.simulators.plc.polishing import PolishingStation
 from wavestack.simulators.plc.program import PlcSimLayout, PolishingPlcProgram, SimOutputs
@@ -251,7 +255,8 @@ class PlcSimulator:
 
     async def _open(self) -> None:
         server = ModbusTcpServer(self._device, address=(self._host, self._port), trace_packet=self._trace_packet,
-                                 trace_pdu=self._trace_pdu, trace_connect=self._trace_connect)
+                                 trace_pdu=self._trace_pdu, trace_connect=self._trace_connect,
+                                 custom_pdu=refusing_request_classes(self.layout))
         await server.serve_forever(background=True)
         self._server = server
         sockets = getattr(server.transport, "sockets", None) or ()
@@ -306,5 +311,8 @@ class PlcSimulator:
         delay_s = self.faults.delay_s
         if delay_s > 0:
             await asyncio.sleep(delay_s)
+        refusal = check_request(self.layout, function_code, address, count, writing=set_values is not None)
+        if refusal is not None:
+            return refusal
         written = [int(v) for v in set_values] if set_values is not None else None
         return self.program.on_request(address, written, self._clock(), start_address, registers)

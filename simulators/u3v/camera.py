@@ -21,7 +21,7 @@ import numpy as np
 from wavestack.simulators.u3v.descriptors import (EP_STREAM_IN, DeviceUnplugged, EndpointHalted, TransferOverflow,
                                                   TransferTimeout)
 from wavestack.simulators.u3v.gencp_device import GenCPDevice
-from wavestack.simulators.u3v.registers import DeviceIdentity, GenCPStatus, build_register_map
+from wavestack.simulators.u3v.registers import FEATURES, DeviceIdentity, GenCPStatus, build_register_map
 from wavestack.simulators.u3v.settings import (MAX_IMAGE_SIDE, CorruptionKind, FrameRenderer, U3VSimCounters,
                                                U3VSimFaults, U3VSimSettings)
 from wavestack.simulators.u3v.stream_device import (PIXEL_FORMATS, SI_CONTROL, FrameScheduler, ImageFormat,
@@ -35,6 +35,8 @@ _log = logging.getLogger(__name__)
 
 TRUTH_HISTORY = 64  # ground truths kept, newest block ids
 _LOCKED_WHILE_ACQUIRING = frozenset({"Width", "Height", "PixelFormat", "TriggerMode"})
+# the features TLParamsLocked locks (SFNC: the transport layer's parameters, those that change the payload)
+_LOCKED_BY_TL = frozenset(spec.name for spec in FEATURES if spec.locked_by == "TLParamsLocked")
 
 
 @dataclass(frozen=True)
@@ -245,6 +247,7 @@ class SimulatedU3VCamera:
         s = self._settings
         self._fmt = ImageFormat(s.width, s.height, PIXEL_FORMATS[s.pixel_format])
         self._exposure_us, self._trigger_mode = float(s.exposure_us), 0
+        self._acquisition_mode, self._tl_params_locked = 0, 0
         self._scheduler.stop(self._now())
         self._generation += 1
         self._stream.reset()
@@ -299,14 +302,22 @@ class SimulatedU3VCamera:
     def _get_feature(self, name: str) -> int | float:
         values: dict[str, int | float] = {"Width": self._fmt.width, "Height": self._fmt.height,
                                           "PixelFormat": self._fmt.pixel_format, "TriggerMode": self._trigger_mode,
-                                          "ExposureTime": self._exposure_us}
+                                          "ExposureTime": self._exposure_us, "PayloadSize": self._fmt.payload_size,
+                                          "AcquisitionMode": self._acquisition_mode,
+                                          "TLParamsLocked": self._tl_params_locked}
         return values[name]
 
     def _set_feature(self, name: str, value: int | float) -> GenCPStatus:
         now = self._now()
         if name in _LOCKED_WHILE_ACQUIRING and self._scheduler.running:
             return GenCPStatus.ACCESS_DENIED
-        if name == "Width":
+        if name in _LOCKED_BY_TL and self._tl_params_locked:
+            return GenCPStatus.ACCESS_DENIED
+        if name == "TLParamsLocked":
+            self._tl_params_locked = int(value)
+        elif name == "AcquisitionMode":
+            self._acquisition_mode = int(value)
+        elif name == "Width":
             self._fmt = replace(self._fmt, width=int(value))
         elif name == "Height":
             self._fmt = replace(self._fmt, height=int(value))

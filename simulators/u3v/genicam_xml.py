@@ -11,7 +11,8 @@ import uuid
 import xml.etree.ElementTree as ET
 import zipfile
 
-from wavestack.simulators.u3v.device_description import FEATURES, DeviceIdentity, FeatureSpec
+from wavestack.simulators.u3v.device_description import (DEVICE_STRINGS, FEATURES, DeviceIdentity, FeatureSpec,
+                                                         StringFeatureSpec)
 
 GENICAM_NAMESPACE = "http://www.genicam.org/GenApi/Version_1_1"
 XML_FILE_NAME = "wavestack_sim_u3v.xml"
@@ -19,13 +20,19 @@ XML_FILE_NAME = "wavestack_sim_u3v.xml"
 FILE_TYPE_XML = 0
 FILE_TYPE_ZIP = 1
 
+#: The SFNC categories under ``Root``, in the order the XML lists them.
+CATEGORIES = ("DeviceControl", "ImageFormatControl", "AcquisitionControl", "TransportLayerControl")
 
-def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FEATURES) -> bytes:
+
+def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FEATURES,
+                strings: tuple[StringFeatureSpec, ...] = DEVICE_STRINGS) -> bytes:
     """The device's GenICam XML (GenApi schema 1.1 subset of the protocol sheet), UTF-8 bytes.
 
     Each feature is an ``Integer``/``Float``/``Enumeration``/``Command`` node whose ``pValue`` names
-    an ``IntReg``/``FloatReg`` called ``<Feature>Reg`` (little-endian, hexadecimal ``Address``).
-    Categories and a ``Port`` node named ``Device`` are included as any GenICam file has them.
+    an ``IntReg``/``FloatReg`` called ``<Feature>Reg`` (little-endian, hexadecimal ``Address``); a
+    feature another one locks carries ``pIsLocked``. Each string feature is a ``StringReg`` on its
+    ABRM string. The SFNC categories (:data:`CATEGORIES`) under ``Root`` list every feature, and a
+    ``Port`` node named ``Device`` is included as any GenICam file has it.
     """
     guid = uuid.uuid5(uuid.NAMESPACE_DNS, f"{identity.manufacturer}.{identity.model}.wavestack")
     root = ET.Element("RegisterDescription", {
@@ -43,15 +50,23 @@ def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FE
         element.text = text
         return element
 
-    categories = {"Root": ["ImageFormatControl", "AcquisitionControl"],
-                  "ImageFormatControl": [f.name for f in features if f.name in {"Width", "Height", "PixelFormat"}],
-                  "AcquisitionControl": [f.name for f in features if f.name not in {"Width", "Height", "PixelFormat"}]}
-    for name, members in categories.items():
+    members = [(spec.category, spec.name) for spec in (*strings, *features)]
+    categories = {"Root": [c for c in CATEGORIES if any(c == category for category, _ in members)]}
+    categories.update({c: [name for category, name in members if category == c] for c in categories["Root"]})
+    for name, listed in categories.items():
         category = child(root, "Category", Name=name, NameSpace="Standard")
-        for member in members:
+        for member in listed:
             child(category, "pFeature", member)
+    for text in strings:
+        node = child(root, "StringReg", Name=text.name, NameSpace="Standard")
+        child(node, "Address", f"0x{text.address:08X}")
+        child(node, "Length", str(text.length))
+        child(node, "AccessMode", text.access)
+        child(node, "pPort", "Device")
     for spec in features:
         node = child(root, spec.kind, Name=spec.name, NameSpace="Standard")
+        if spec.locked_by:
+            child(node, "pIsLocked", spec.locked_by)
         if spec.kind == "Enumeration":
             for entry_name, value in spec.entries:
                 entry = child(node, "EnumEntry", Name=entry_name, NameSpace="Standard")

@@ -9,7 +9,7 @@ address        length      content
 0x0000_1000    0x44        SBRM (USB3 Vision bootstrap)
 0x0000_2000    0x30        SIRM (streaming interface)
 0x0000_3000    8 + 64      manifest table (one entry)
-0x0001_0000    0x24        feature registers (see :data:`FEATURES`)
+0x0001_0000    0x30        feature registers (see :data:`FEATURES`)
 0x0010_0000    file size   the GenICam XML file (plain or ZIP, per the manifest entry)
 =============  ==========  ===========================================================
 
@@ -33,8 +33,9 @@ import struct
 from collections.abc import Callable
 from typing import Protocol
 
-from wavestack.simulators.u3v.device_description import (FEATURE_BASE_ADDRESS, FEATURES, PIXEL_FORMAT_ENTRIES,
-                                                         DeviceIdentity, FeatureKind, FeatureSpec)
+from wavestack.simulators.u3v.device_description import (ABRM_ADDRESS, DEVICE_STRINGS, FEATURE_BASE_ADDRESS, FEATURES,
+                                                         PIXEL_FORMAT_ENTRIES, DeviceIdentity, FeatureKind,
+                                                         FeatureSpec)
 from wavestack.simulators.u3v.genicam_xml import (FILE_TYPE_XML, FILE_TYPE_ZIP, GENICAM_NAMESPACE, XML_FILE_NAME,
                                                   genicam_xml, manifest_file)
 from wavestack.simulators.u3v.register_map import AccessMode, GenCPStatus, Register, RegisterMap
@@ -46,7 +47,6 @@ __all__ = [
     "Register", "RegisterHooks", "RegisterMap", "build_register_map", "genicam_xml", "manifest_file",
 ]
 
-ABRM_ADDRESS = 0x0000_0000
 SBRM_ADDRESS = 0x0000_1000
 SIRM_ADDRESS = 0x0000_2000
 SIRM_LENGTH = 0x30
@@ -125,15 +125,17 @@ def _abrm(identity: DeviceIdentity, hooks: RegisterHooks) -> list[Register]:
     # capability bits (informational, the sheet does not define them): user-defined name, timestamp,
     # family name, SBRM present, WRITEMEM_ACK carries the written length
     capability = (1 << 0) | (1 << 3) | (1 << 8) | (1 << 9) | (1 << 11)
+    # the strings are also the Device Control features of the XML (DEVICE_STRINGS says where)
+    text = {"ManufacturerName": identity.manufacturer, "ModelName": identity.model, "FamilyName": identity.family,
+            "DeviceVersion": identity.device_version, "ManufacturerInfo": identity.manufacturer_info,
+            "SerialNumber": identity.serial}
+    strings = [_text(spec.abrm_register, spec.address, text[spec.abrm_register], spec.length)
+               if spec.access == "RO" else
+               Register(spec.abrm_register, spec.address, spec.length, spec.access, user_name.read, user_name.write)
+               for spec in DEVICE_STRINGS]
     return [
         _constant("GenCPVersion", a + 0x0000, struct.pack("<HH", 0, 1)),
-        _text("ManufacturerName", a + 0x0004, identity.manufacturer),
-        _text("ModelName", a + 0x0044, identity.model),
-        _text("FamilyName", a + 0x0084, identity.family),
-        _text("DeviceVersion", a + 0x00C4, identity.device_version),
-        _text("ManufacturerInfo", a + 0x0104, identity.manufacturer_info),
-        _text("SerialNumber", a + 0x0144, identity.serial),
-        Register("UserDefinedName", a + 0x0184, 64, "RW", user_name.read, user_name.write),
+        *strings,
         _constant("DeviceCapability", a + 0x01C4, struct.pack("<Q", capability)),
         _constant("MaximumDeviceResponseTime", a + 0x01CC, struct.pack("<I", identity.max_response_time_ms)),
         _constant("ManifestTableAddress", a + 0x01D0, struct.pack("<Q", MANIFEST_ADDRESS)),

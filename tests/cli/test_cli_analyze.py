@@ -78,3 +78,49 @@ def test_truncated_dat(capsys, tmp_path) -> None:
 
 def test_images_need_a_wavelength(capsys) -> None:
     _one_line_error(capsys, [str(PSI / "Image197.jpg")], "--wavelength-nm")
+
+
+# ----------------------------------------------------------------------------- aperture choices
+
+CYCLE = [str(PSI / f"Image{i}.jpg") for i in range(5, 11)]
+
+
+def test_aperture_choices_are_reported_with_the_edge_circle(capsys) -> None:
+    """``--aperture detected`` (default) and ``circle``: the JSON says which, and gives the edge
+    circle with its uncertainties; the circle aperture's own circle is that edge circle (its
+    enclosing circle runs through pixel centres, so up to ~0.5 px inside for a 285 px circle;
+    the largest gap between a circle and the nearest pixel centre inside it is far smaller)."""
+    detected = _run(capsys, *CYCLE, "--method", "aia", "--wavelength-nm", "654", "--modes", "15")
+    circle = _run(capsys, *CYCLE, "--method", "aia", "--wavelength-nm", "654", "--modes", "15",
+                  "--aperture", "circle")
+    assert detected["aperture"]["choice"] == "detected" and circle["aperture"]["choice"] == "circle"
+    edge = circle["aperture"]["edge_circle"]
+    assert edge == detected["aperture"]["edge_circle"]  # the same detection underneath
+    assert 0 < edge["radius_uncertainty"] < 1 and all(0 < s < 1 for s in edge["centre_uncertainty"])
+    assert edge["points"] > 1000 and edge["rejected"] >= 0
+    assert edge["radius"] - 0.5 < circle["aperture"]["radius"] <= edge["radius"]
+    assert np.hypot(*np.subtract(circle["aperture"]["centre"], edge["centre"])) < 0.5
+
+
+def test_a_user_mask_is_analysed(capsys, tmp_path) -> None:
+    mask = np.zeros((600, 800), dtype=bool)
+    mask[150:450, 250:550] = True
+    path = tmp_path / "mask.npy"
+    np.save(path, mask)
+    report = _run(capsys, *CYCLE, "--wavelength-nm", "654", "--modes", "15", "--mask", str(path))
+    assert report["aperture"]["choice"] == "mask" and "edge_circle" not in report["aperture"]
+    assert report["aperture"]["valid_pixels"] == int(mask.sum())
+    assert report["aperture"]["bbox"] == [250, 150, 549, 449]
+
+
+def test_aperture_option_errors(capsys, tmp_path) -> None:
+    small = tmp_path / "small.npy"
+    np.save(small, np.ones((10, 10), dtype=bool))
+    _one_line_error(capsys, [*CYCLE, "--wavelength-nm", "654", "--mask", str(small)], "small.npy", "shape")
+    empty = tmp_path / "empty.npy"
+    np.save(empty, np.zeros((600, 800), dtype=bool))
+    _one_line_error(capsys, [*CYCLE, "--wavelength-nm", "654", "--mask", str(empty)], "empty.npy", "no valid pixel")
+    _one_line_error(capsys, [*CYCLE, "--wavelength-nm", "654", "--mask", str(empty), "--aperture", "circle"],
+                    "exclude each other")
+    _one_line_error(capsys, [str(DATA / "zygo-dat" / "valid_zygo_dat_file.dat"), "--aperture", "circle"],
+                    "valid_zygo_dat_file.dat", "measured map")

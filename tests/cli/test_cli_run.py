@@ -19,8 +19,8 @@ from wavestack.recording import RecordingReader
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = Path(__file__).resolve().parents[1] / "configs" / "station-small.toml"
 WAVESTACK = [sys.executable, "-m", "wavestack.cli"]
-REQUIRED = {"frame_ids", "latency_ms", "coefficients", "ordering", "residual_rms", "fitter", "counters",
-            "truth_error_rms", "truth_rms"}
+REQUIRED = {"frame_ids", "latency_ms", "coefficients", "ordering", "residual_rms", "residual_pv", "fitter",
+            "counters", "truth_error_rms", "truth_rms"}
 
 
 def _run(*args: str, timeout: float = 240) -> subprocess.CompletedProcess[str]:
@@ -34,16 +34,28 @@ def test_json_prints_one_object_per_result_then_a_summary_and_nothing_else() -> 
     assert [line["type"] for line in lines] == ["result"] * 3 + ["summary"]
     for result in lines[:3]:
         assert REQUIRED <= set(result), REQUIRED - set(result)
-        assert set(result["counters"]) == {"acquired", "processed", "dropped"}
         assert len(result["frame_ids"]) == 5 and result["ordering"] == "noll"
-    assert [r["counters"]["processed"] for r in lines[:3]] == [1, 2, 3]
-    assert lines[-1]["results"] == 3
+        assert result["residual_pv"] > result["residual_rms"] > 0  # waves, like the rms
+    for line in lines:  # every result and the summary: frames and sets apart, each adding up
+        counters = line["counters"]
+        frames, sets = counters["frames"], counters["sets"]
+        assert counters["frames_per_set"] == 5
+        assert frames["acquired"] == frames["processed"] + frames["dropped"] + frames["pending"], frames
+        assert sets["assembled"] == sets["processed"] + sets["dropped"] + sets["pending"], sets
+    assert [r["counters"]["sets"]["processed"] for r in lines[:3]] == [1, 2, 3]
+    assert [r["counters"]["frames"]["processed"] for r in lines[:3]] == [5, 10, 15]
+    assert lines[-1]["results"] == 3 and lines[-1]["counters"]["sets"]["processed"] == 3
 
 
 def test_the_live_view_and_summary_on_a_plain_stdout() -> None:
     done = _run("run", "--config", str(SMALL), "--frames", "2")
     assert done.returncode == 0, done.stderr
     assert "latency p50" in done.stdout and "2 results (2 valid)" in done.stdout
+    out = done.stdout.splitlines()
+    summary = out[next(k for k, line in enumerate(out) if line.startswith("2 results (2 valid) in ")):]
+    assert summary[1].startswith("frames acquired ") and " = 10 in processed sets + " in summary[1]
+    assert summary[2].startswith("sets of 5 assembled ") and " = 2 processed + " in summary[2]
+    assert "fit residual: rms " in done.stdout  # the live view's last block
     assert "\x1b[" not in done.stdout  # no cursor movement when stdout is not a terminal
 
 
@@ -73,6 +85,7 @@ def test_sigterm_stops_cleanly_with_the_recording_flushed_and_replayable(tmp_pat
     lines = [json.loads(line) for line in replayed.stdout.splitlines()]
     assert lines[-1]["results"] == results and lines[-1]["compared"] == results
     assert lines[-1]["max_difference_rms"] <= 1e-12  # same frames, same fitters: the same numbers
+    assert lines[-1]["compared_residual_pv"] == results and lines[-1]["max_residual_pv_difference"] <= 1e-12
 
 
 def test_a_config_that_does_not_validate_is_one_line_naming_file_and_key(tmp_path: Path) -> None:

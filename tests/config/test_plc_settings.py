@@ -52,6 +52,15 @@ def test_driver_map_and_simulator_layout_come_from_the_same_values(tmp_path: Pat
     assert timing.io_timeout_s == PlcLinkSettings().io_timeout_s
 
 
+def test_the_simulator_answers_the_function_codes_the_driver_is_configured_with(tmp_path: Path) -> None:
+    # A PLC configured for input registers (FC4) and single writes by FC16 must be simulated so: the
+    # simulator refuses every function code its map does not list (exception 1).
+    config = load_plc_config(write(tmp_path, MINIMAL + "read_function_code = 4\nsingle_write_function_code = 16\n"))
+    register_map, layout = config.link.register_map(), config.sim_layout()
+    assert layout.read_function == register_map.status.read_function == 4
+    assert layout.single_write_function == register_map.heartbeat.write_function == 16
+
+
 @pytest.mark.parametrize(("text", "message"), [
     ("[pzt]\nurl = 'x'\n", r"plc.toml: missing table \[plc\]"),
     (MINIMAL + "unit = 2\n", r"\[plc\] unknown key 'unit'"),

@@ -54,6 +54,17 @@ def test_minimal_config_takes_defaults_and_builds_objects(tmp_path: Path) -> Non
     assert (device.personality.prompt, device.vlimit_v, device.personality.decimals) == ("*", 75.0, 1)
 
 
+
+def test_an_mdt693a_or_a_b_unit_in_its_a_mode_is_configured_end_to_end(tmp_path: Path) -> None:
+    settings, simulator = load_pzt_config(write(
+        tmp_path, MINIMAL + 'command_set = "mdt693a"\n', "[pzt.simulator]\ncompatibility_mode = true\n"))
+    assert build_piezo(settings).configured_command_set == "mdt693a"
+    assert build_simulated_device(simulator).compatibility_mode is True
+    _, a_unit = load_pzt_config(write(tmp_path, MINIMAL, '[pzt.simulator]\nmodel = "MDT693A"\n'))
+    assert build_simulated_device(a_unit).personality.model == "MDT693A"
+    # the default detects the command set at open
+    assert build_piezo(load_pzt_config(write(tmp_path, MINIMAL))[0]).configured_command_set == "auto"
+
 @pytest.mark.parametrize(
     ("body", "extra", "key", "expectation"),
     [

@@ -25,6 +25,7 @@ import json
 import subprocess
 import sys
 import threading
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -106,7 +107,42 @@ def test_results_match_the_simulated_optic(station_factory) -> None:
     pupil = records[0][1].pupil
     # the obscuration (radius 36 px: ~18 lenslet areas) darkens part of the pupil, not all of it
     assert 0.7 * pupil.sum() < min(lit_counts) and max(lit_counts) < pupil.sum()
-    assert summary.counters.processed == 6 and summary.valid == 6
+    c = summary.counters  # one spot frame per set
+    assert (c.frames_per_set, c.sets.processed, c.frames.processed, summary.valid) == (1, 6, 6, 6)
+
+
+def _residual_of(sensor: ShackHartmannSettings, lenslets: LensletSlopes, coefficients: object) -> tuple[float, float]:
+    """RMS and PV of the slope misfit times the pitch, from a reconstructor built here for the same lenslets."""
+    cx, cy = sensor.pupil_centre_px
+    reconstructor = ModalReconstructor.for_circle(lenslets.grid.centres_xy(), (cx, -cy), sensor.pupil_radius_px,
+                                                  mode_list("noll", sensor.modes), lenslets.lit)
+    model_x, model_y = reconstructor.predict(np.asarray(coefficients))
+    lit, slopes = lenslets.lit, lenslets.slopes_waves_per_px
+    misfit = np.concatenate([slopes[lit, 0] - model_x[lit], slopes[lit, 1] - model_y[lit]])
+    return float(np.sqrt(np.mean(misfit ** 2))) * sensor.pitch_px, float(np.ptp(misfit)) * sensor.pitch_px
+
+
+def test_counts_add_up_after_drops_and_results_carry_their_residual_pv(station_factory, check_counts) -> None:
+    config = load_station_config(SH_SMALL)
+    station, _ = station_factory(config)
+    records: list[CycleRecord] = []
+
+    def on_result(record: CycleRecord) -> None:
+        records.append(record)
+        if record.result.index == 1:
+            time.sleep(0.5)  # ten frames at 20 Hz meet a ring of four: six or more dropped
+
+    summary = station.run(stop=threading.Event(), on_result=on_result, max_results=4)
+    check_counts(records, 1)
+    assert records[2].result.counters.frames.dropped >= records[1].result.counters.frames.dropped + 6
+    assert summary.counters.sets.processed == sum(1 for record in records if record.frames)
+    for record in records:
+        result = record.result
+        if not result.valid:  # a set lost on a loaded machine: no misfit to check
+            continue
+        rms, pv = _residual_of(config.shack_hartmann, record.lenslets, result.coefficients)
+        assert result.residual_rms == pytest.approx(rms, rel=1e-9) and result.residual_pv == pytest.approx(pv, rel=1e-9)
+        assert 0 < result.residual_rms < result.residual_pv
 
 
 def test_json_lines_through_the_cli() -> None:
@@ -119,6 +155,9 @@ def test_json_lines_through_the_cli() -> None:
     for result in lines[:3]:
         assert result["valid"] and result["fitter"] == "modal" and len(result["coefficients"]) == 36
         assert result["truth_error_rms"] is not None and result["aperture"]["valid_lenslets"] > 0
+        assert result["residual_pv"] > result["residual_rms"] > 0
+        frames, sets = result["counters"]["frames"], result["counters"]["sets"]
+        assert result["counters"]["frames_per_set"] == 1 and frames["processed"] == sets["processed"]
     assert lines[-1]["results"] == 3 and lines[-1]["valid"] == 3
 
 

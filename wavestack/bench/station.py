@@ -146,7 +146,8 @@ class _PathRun:
 
     def _take_mark(self, result: StationResult) -> None:
         self.marks.append(_mark(self.devices, *self.meters))
-        self.counters.append((result.counters.acquired, result.counters.dropped))
+        frames = result.counters.frames
+        self.counters.append((frames.acquired, frames.dropped))
 
     def _change_aperture(self) -> None:
         assert self.devices.bench is not None

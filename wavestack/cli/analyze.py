@@ -15,12 +15,13 @@ from typing import Any
 
 import numpy as np
 
+from wavestack.cli.analyze_aperture import add_aperture_arguments, aperture_choice, aperture_report
+from wavestack.cli.analyze_aperture import format_aperture, refuse_for_measured_map
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.measured_map import ANALYZE_FLAGS, MapPixels, add_fit_method_argument, advised, fit_mask_of
 from wavestack.cli.measured_map import map_lines, map_report, read_map_wavefront, reject_unsupported
 from wavestack.pipeline import Aperture, IllConditionedBasis, InputError, available_methods, build_fitter
-from wavestack.pipeline import DetectionSettings, detect_aperture
 from wavestack.pipeline import ConicTest, implied_conic_constant, null_wavefront_waves
 from wavestack.pipeline import read_frame, read_frame_set
 from wavestack.pipeline import MeasuredWavefront, wavefront_from_carrier, wavefront_from_phase_shifts
@@ -58,6 +59,7 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--diameter-mm", type=float, help="diameter of the analysed aperture, mm")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--save-map", metavar="OUT.npy", help="save the analysed wavefront (waves, NaN outside)")
+    add_aperture_arguments(parser)
 
 
 def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float, MapPixels | None]:
@@ -67,20 +69,24 @@ def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float, MapPix
     if suffixes & set(MEASURED_MAP_SUFFIXES):
         if len(paths) != 1:
             raise InputError(f"{paths[0]}: a measured map (.dat/.datx/.h5) is analysed on its own; got {len(paths)} files")
+        refuse_for_measured_map(args, paths[0])
         return read_map_wavefront(paths[0], args.wavelength_nm)
     if args.wavelength_nm is None:
         raise InputError(f"{paths[0]}: --wavelength-nm is required for interferogram images")
     if len(paths) == 1:
         if args.method not in (None, "carrier"):
             raise InputError(f"{paths[0]}: one frame can only be analysed by the carrier method; got --method {args.method}")
-        return wavefront_from_carrier(read_frame(paths[0]), sign=args.carrier_sign), args.wavelength_nm, None
+        frame = read_frame(paths[0])
+        choice = aperture_choice(args, frame.shape[:2])
+        return wavefront_from_carrier(frame, sign=args.carrier_sign, aperture=choice), args.wavelength_nm, None
     if args.method == "carrier":
         raise InputError(f"{paths[0]}: the carrier method takes one frame; got {len(paths)}")
     frames = read_frame_set(paths)
     if args.steps is not None and len(args.steps) != len(paths):
         raise InputError(f"{paths[0]}: --steps gives {len(args.steps)} steps for {len(paths)} frames")
     method = {"psi": "lsq", None: "lsq", "aia": "aia", "pca": "pca"}[args.method]
-    measured = wavefront_from_phase_shifts(frames, method=method, steps_rad=args.steps, direction=args.direction)
+    measured = wavefront_from_phase_shifts(frames, method=method, steps_rad=args.steps, direction=args.direction,
+                                           aperture=aperture_choice(args, frames.shape[1:3]))
     return measured, args.wavelength_nm, None
 
 
@@ -145,15 +151,9 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if args.save_map:
         np.save(args.save_map, analysed)
     rms, pv = float(np.nanstd(analysed)), float(np.nanmax(analysed) - np.nanmin(analysed))
-    cx, cy, radius = aperture.enclosing_circle()
-    rows, cols = np.nonzero(aperture.mask)
     report.update({
         "wavelength_nm": wavelength_nm,
-        "aperture": {
-            "centre": [cx, cy], "radius": radius,
-            "bbox": [int(cols.min()), int(rows.min()), int(cols.max()), int(rows.max())],
-            "topology": aperture.topology.value, "valid_pixels": int(aperture.valid_count),
-        },
+        "aperture": aperture_report(measured),
         "fit_method": fitter.basis.method, "fit_method_reason": fitter.diagnostics.method_reason,
         "modes": len(fitter.basis.modes), "ordering": fitter.basis.ordering,
         "first_index": fitter.basis.first_index, "normalisation": fitter.basis.normalisation,
@@ -178,8 +178,7 @@ def _format(report: dict[str, Any]) -> str:
         f"phase       {report['method']}"
         + (f", steps {', '.join(f'{s:.1f}' for s in report['steps_deg'])} deg"
            + (" (estimated)" if report.get("steps_estimated") else "") if "steps_deg" in report else ""),
-        f"aperture    {ap['topology']}, {ap['valid_pixels']} px, centre (col {ap['centre'][0]:.1f}, "
-        f"row {ap['centre'][1]:.1f}), radius {ap['radius']:.1f} px",
+        format_aperture(ap),
         f"wavefront   RMS {report['rms_waves']:.4f} waves ({report['rms_nm']:.1f} nm), "
         f"PV {report['pv_waves']:.4f} waves ({report['pv_nm']:.1f} nm) at {report['wavelength_nm']} nm",
     ]

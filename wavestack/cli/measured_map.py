@@ -99,7 +99,7 @@ def read_map_wavefront(path: Path, wavelength_nm: float | None) -> tuple[Measure
         outside_outline=int(np.count_nonzero(valid & ~detected)),
     )
     waves = np.where(valid, data.map_nm / wavelength, np.nan)
-    measured = MeasuredWavefront(waves=waves, aperture=Aperture.from_mask(outline), method="file",
+    measured = MeasuredWavefront(waves=waves, aperture=Aperture.from_mask(outline), method="file", aperture_choice="file",
                                  timings={"read": time.perf_counter() - tick})
     return measured, wavelength, pixels
 

@@ -29,6 +29,7 @@ from wavestack.station import (
     ResultSink,
     Station,
     StationSummary,
+    counter_lines,
     open_station_devices,
     render_live_view,
 )
@@ -83,13 +84,12 @@ class JsonLines:
 
 
 def _summary_lines(summary: StationSummary) -> list[str]:
-    c = summary.counters
     stages = ", ".join(f"{k} {v:.1f}" for k, v in summary.stage_ms.items())
     return [
         f"{summary.results} results ({summary.valid} valid) in {summary.duration_s:.1f} s: "
         f"{summary.results_per_s:.1f}/s, latency p50 {summary.latency_p50_ms:.0f} ms, p99 {summary.latency_p99_ms:.0f} ms",
-        f"frames acquired {c.acquired}, dropped {c.dropped}; aperture changes {summary.aperture_changes}; "
-        f"results on a fallback fitter {summary.fallback_results}",
+        *counter_lines(summary.counters),
+        f"aperture changes {summary.aperture_changes}; results on a fallback fitter {summary.fallback_results}",
         f"mean ms per stage: {stages}" if stages else "no stage ran",
     ] + ([f"last invalid result: {summary.last_reason}"] if summary.last_reason else [])
 

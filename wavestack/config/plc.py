@@ -156,6 +156,7 @@ class PlcConfig:
             output_block=link.output_block, command_word_order=link.command_word_order or link.word_order,
             output_word_order=link.output_word_order or link.word_order,
             watchdog_timeout_s=link.watchdog_timeout_s,
+            read_function=link.read_function_code, single_write_function=link.single_write_function_code,
             pass_duration_s=self.simulator.polishing.pass_duration_s if self.simulator else 0.0)
 
     def polishing_station(self) -> PolishingStation:

@@ -49,18 +49,22 @@ class PiezoSettings:
                                           doc="largest accepted |read-back - command|, V")
     timeout_s: float = setting(1.0, minimum=0.01, maximum=60.0, doc="per-exchange timeout, s")
     settle_s: float = setting(0.05, minimum=0.0, maximum=10.0, doc="wait after each phase step, s")
+    command_set: Literal["auto", "mdt693b", "mdt693a"] = setting(
+        "auto", doc="auto: detected at open; mdt693b; mdt693a (an MDT693A, or a B unit in its A mode)")
 
 
 @dataclass(frozen=True)
 class PiezoSimulatorSettings:
     """``[pzt.simulator]``: personality of the simulated controller (its ``id?`` reply and settings)."""
 
-    model: Literal["MDT693B", "MDT694B"] = setting("MDT693B", doc="MDT693B (x, y, z) or MDT694B (x)")
+    model: Literal["MDT693B", "MDT694B", "MDT693A"] = setting(
+        "MDT693B", doc="MDT693B (x, y, z), MDT694B (x) or MDT693A (x, y, z; single-letter commands only)")
     echo: bool = setting(True, doc="echo at power-on")
     prompt: Literal[">", "*"] = setting(">", doc="'>' (firmware 1.10) or '*' (firmware 1.05)")
     firmware: str = setting("1.10", doc="firmware version in the id? reply")
     serial_number: str = setting("SIM-000001", doc="serial number in the id? reply")
     vlimit_v: float = setting(150.0, choices=(75.0, 100.0, 150.0), doc="front-panel limit switch, V")
+    compatibility_mode: bool = setting(False, doc="a B unit powered up in its MDT693A compatibility mode (cm=1)")
 
 
 def parse_pzt_config(document: Mapping[str, Any], *, source: str) -> tuple[PiezoSettings, PiezoSimulatorSettings]:
@@ -100,7 +104,7 @@ def build_piezo(settings: PiezoSettings) -> MDT693B:
     """The driver the settings describe (not yet opened)."""
     return MDT693B(settings.url, axes=settings.axes, software_min_v=settings.software_min_v,
                    software_max_v=settings.software_max_v, readback_tolerance_v=settings.readback_tolerance_v,
-                   timeout_s=settings.timeout_s)
+                   timeout_s=settings.timeout_s, command_set=settings.command_set)
 
 
 def build_calibration(settings: PiezoSettings) -> PhaseStepCalibration:
@@ -113,4 +117,5 @@ def build_simulated_device(simulator: PiezoSimulatorSettings) -> MDT693BDevice:
     star = simulator.prompt == "*"
     return MDT693BDevice(MDT693BPersonality(
         model=simulator.model, echo=simulator.echo, prompt=simulator.prompt, firmware=simulator.firmware,
-        serial_number=simulator.serial_number, vlimit_v=simulator.vlimit_v, decimals=1 if star else 2))
+        serial_number=simulator.serial_number, vlimit_v=simulator.vlimit_v, decimals=1 if star else 2,
+        compatibility_mode=simulator.compatibility_mode))

@@ -2,7 +2,9 @@
 
 With the recorded settings every result is recomputed on the fitter that ran it live (a ``qr``
 stand-in while the configured map was being built, then the configured fitter), so a replay
-reproduces the recorded coefficients; :attr:`ReplayedResult.difference_rms` says by how much.
+reproduces the recorded coefficients; :attr:`ReplayedResult.difference_rms` says by how much,
+and :attr:`ReplayedResult.residual_pv_difference` by how much the residual's peak-to-valley
+moved (recordings made before results carried ``residual_pv`` have nothing to compare it with).
 With other settings (another ``--config``) the fitters are built as those settings say,
 synchronously.
 """
@@ -17,26 +19,48 @@ import numpy as np
 
 from wavestack.config import StationConfig, parse_station_config
 from wavestack.recording.reader import RecordingReader
-from wavestack.station import InterferometerOutcome, SlopeOutcome, build_processor
+from wavestack.station import InterferometerOutcome, SlopeOutcome, build_processor, json_ready
 
 
 @dataclass(frozen=True, eq=False)
 class ReplayedResult:
-    """One recomputed result beside the recorded one."""
+    """One recomputed result beside the recorded one.
+
+    Attributes
+    ----------
+    index : int
+        The station's set index.
+    frame_ids : tuple of int
+    processed : InterferometerOutcome or SlopeOutcome
+        The recomputed outcome.
+    recorded_coefficients : ndarray or None
+        The live result's coefficients (None when it was invalid or not recorded).
+    difference_rms : float or None
+        RMS of recomputed minus recorded coefficients, waves.
+    recorded_residual_pv : float or None
+        The live result's residual peak-to-valley, waves (None when invalid, or recorded before
+        results carried it).
+    residual_pv_difference : float or None
+        Recomputed minus recorded residual peak-to-valley, waves.
+    """
 
     index: int
     frame_ids: tuple[int, ...]
     processed: InterferometerOutcome | SlopeOutcome
     recorded_coefficients: np.ndarray | None
     difference_rms: float | None
+    recorded_residual_pv: float | None = None
+    residual_pv_difference: float | None = None
 
     def to_json(self) -> dict[str, object]:
         p = self.processed
         coefficients = [] if p.coefficients_waves is None else [float(c) for c in p.coefficients_waves]
-        return {"type": "result", "index": self.index, "frame_ids": list(self.frame_ids), "valid": p.valid,
-                "reason": p.reason, "coefficients": coefficients,
-                "fitter": p.fitter_kind, "fitter_fallback": p.fitter_fallback,
-                "unwrap_path": p.unwrap_path, "difference_rms": self.difference_rms}
+        return json_ready({"type": "result", "index": self.index, "frame_ids": list(self.frame_ids), "valid": p.valid,
+                           "reason": p.reason, "coefficients": coefficients,
+                           "fitter": p.fitter_kind, "fitter_fallback": p.fitter_fallback,
+                           "unwrap_path": p.unwrap_path, "residual_rms": p.residual_rms,
+                           "residual_pv": p.residual_pv, "difference_rms": self.difference_rms,
+                           "residual_pv_difference": self.residual_pv_difference})
 
 
 def recorded_config(reader: RecordingReader, path: str | Path) -> StationConfig:
@@ -76,6 +100,13 @@ def replay(reader: RecordingReader, config: StationConfig, *, same_settings: boo
             found = processed.coefficients_waves
             if live is not None and found is not None and live.shape == found.shape:
                 difference = float(np.sqrt(np.mean((found - live) ** 2)))
-            yield ReplayedResult(set_index, tuple(f.frame_id for f in frames), processed, live, difference)
+            live_pv = None
+            if live is not None and "residual_pv" in recorded:  # a column since results carry it
+                live_pv = float(recorded["residual_pv"][row])
+            pv_difference = None
+            if live_pv is not None and processed.valid:
+                pv_difference = float(processed.residual_pv - live_pv)
+            yield ReplayedResult(set_index, tuple(f.frame_id for f in frames), processed, live, difference,
+                                 live_pv, pv_difference)
     finally:
         processor.close()

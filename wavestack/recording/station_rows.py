@@ -3,6 +3,10 @@
 A recording row has the same keys and shapes for every result, valid or not (an invalid result
 has NaN coefficients and ``-1`` frame ids), so the file's columns are declared when it is created
 and the file is crash-safe from its first flush.
+
+Columns added since the first recordings (``residual_pv`` and the frame and set counters
+``frames_acquired`` .. ``sets_pending``) are only new columns: the reader reads whatever columns a
+file has, so recordings made before them still read and replay (without those columns).
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ from wavestack import __version__
 from wavestack.config import StationConfig
 from wavestack.recording.format import RowValue
 from wavestack.recording.writer import RecordingWriter
-from wavestack.station import CycleRecord, Counters, StationResult
+from wavestack.station import Counters, CycleRecord, StationResult
 
 #: Numeric frame metadata the station records (the piezo tags of phase-stepped frames).
 FRAME_METADATA = ("pzt_commanded_v", "pzt_readback_v", "phase_step_rad")
@@ -30,14 +34,23 @@ def recording_row(result: StationResult, modes: int, frames_per_set: int) -> dic
     return {
         "index": result.index, "valid": result.valid, "reason": result.reason or "",
         "frame_ids": frame_ids, "exposure_time_ns": result.exposure_time_ns, "latency_ms": result.latency_ms,
-        "coefficients": coefficients, "residual_rms": result.residual_rms,
+        "coefficients": coefficients, "residual_rms": result.residual_rms, "residual_pv": result.residual_pv,
         "fitter": result.fitter or "", "fitter_fallback": result.fitter_fallback,
         "aperture_id": -1 if result.aperture is None or result.aperture.id is None else int(result.aperture.id),
         "aperture_changed": result.aperture_changed,
         "unwrap_path": result.unwrap_path or "",
         "truth_error_rms": np.nan if result.truth_error_rms is None else result.truth_error_rms,
         "sent_to_plc": result.output is not None and result.output.sent,
+        **counter_columns(result.counters),
     }
+
+
+def counter_columns(counters: Counters) -> dict[str, RowValue]:
+    """The frame and set counters as result columns (``frames_acquired`` .. ``sets_pending``)."""
+    f, s = counters.frames, counters.sets
+    return {"frames_acquired": f.acquired, "frames_processed": f.processed, "frames_dropped": f.dropped,
+            "frames_pending": f.pending, "sets_assembled": s.assembled, "sets_processed": s.processed,
+            "sets_dropped": s.dropped, "sets_pending": s.pending}
 
 
 def conventions(config: StationConfig) -> dict[str, str | float | int]:
@@ -55,7 +68,7 @@ def open_recording(path: str, config: StationConfig, frame_shape: tuple[int, int
     """A recording for this station, its columns declared up front."""
     fps = config.processing.frames_per_set
     # the columns' types and shapes, from an empty row (every row has the same ones)
-    template = recording_row(StationResult.invalid(0, "", Counters(0, 0, 0), ordering=config.processing.ordering),
+    template = recording_row(StationResult.invalid(0, "", Counters.zero(fps), ordering=config.processing.ordering),
                              config.processing.modes, fps)
     return RecordingWriter(path, config_toml=config.text, conventions=conventions(config),
                            software_version=__version__, frame_shape=frame_shape, frame_dtype=frame_dtype,

@@ -16,15 +16,16 @@ from wavestack.station.aperture_confirmation import (
     Detection,
     confirm,
 )
+from wavestack.station.counters import Counters, FrameCounts, SetCounts
 from wavestack.station.cycle import CycleRecord, ProcessorOutcome, ResultSink, make_result, with_output
 from wavestack.station.devices import StationDevices, configure_camera, open_station_devices, phase_steps_rad
 from wavestack.station.fitter_cache import FALLBACK_METHOD, FitterCache, FitterChoice
 from wavestack.station.interferometer import CARRIER_REFRESH_SETS, InterferometerOutcome, SetProcessor
-from wavestack.station.live_view import LiveSnapshot, LiveStats, render_live_view
-from wavestack.station.outputs import PlcOutput
+from wavestack.station.live_view import LiveSnapshot, LiveStats, counter_lines, render_live_view
+from wavestack.station.outputs import PlcOutput, start_up_hold
+from wavestack.station.residual import ResidualPeakToValley
 from wavestack.station.results import (
     ApertureRecord,
-    Counters,
     FitDiagnostics,
     FitterDiagnostics,
     Heartbeat,
@@ -43,17 +44,18 @@ from wavestack.station.shack_hartmann import (
     coefficient_errors,
     pupil_lenslets,
 )
-from wavestack.station.sources import CarrierSource, PhaseStepSource, SourceCounters
+from wavestack.station.sources import CarrierSource, PhaseStepSource
 from wavestack.station.station import Station, StationSummary, build_processor
 from wavestack.station.truth import TruthCheck
 
 __all__ = [
     "ApertureAction", "ApertureEvent", "AperturePhase", "ApertureRecord", "ApertureState", "CARRIER_REFRESH_SETS",
     "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
-    "FitterChoice", "FitterDiagnostics", "Heartbeat", "InterferometerOutcome", "LensletSlopes", "LiveSnapshot",
-    "LiveStats", "MODAL", "OutputRecord", "PhaseStepSource", "PlcOutput", "ProcessorOutcome",
-    "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetProcessor", "SlopeOutcome", "SlopeProcessor",
-    "SourceCounters", "Station", "StationDevices", "StationResult", "StationSummary", "TruthCheck", "TruthErrors",
-    "build_processor", "coefficient_errors", "configure_camera", "confirm", "json_ready", "make_result",
-    "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view", "with_output",
+    "FitterChoice", "FitterDiagnostics", "FrameCounts", "Heartbeat", "InterferometerOutcome", "LensletSlopes",
+    "LiveSnapshot", "LiveStats", "MODAL", "OutputRecord", "PhaseStepSource", "PlcOutput", "ProcessorOutcome",
+    "ReconstructorDiagnostics", "ResidualPeakToValley", "ResultSink", "SentCommand", "SetCounts", "SetProcessor",
+    "SlopeOutcome", "SlopeProcessor", "Station", "StationDevices", "StationResult", "StationSummary", "TruthCheck",
+    "TruthErrors", "build_processor", "coefficient_errors", "configure_camera", "confirm", "counter_lines",
+    "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view",
+    "start_up_hold", "with_output",
 ]

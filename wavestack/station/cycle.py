@@ -18,9 +18,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.drivers.frames import Frame
+from wavestack.station.counters import Counters
 from wavestack.station.results import (
     ApertureRecord,
-    Counters,
     FitterDiagnostics,
     OutputRecord,
     StationResult,
@@ -40,6 +40,8 @@ class ProcessorOutcome(Protocol):
     def coefficients_waves(self) -> NDArray[np.float64] | None: ...
     @property
     def residual_rms(self) -> float: ...
+    @property
+    def residual_pv(self) -> float: ...
     @property
     def fitter_kind(self) -> str | None: ...
     @property
@@ -91,7 +93,7 @@ def make_result(index: int, frames: tuple[Frame, ...], outcome: ProcessorOutcome
         latency_ms=(now_ns - exposure_ns) * 1e-6, valid=outcome.valid, reason=outcome.reason,
         coefficients=tuple(float(c) for c in coefficients) if coefficients is not None else (),
         ordering=ordering, normalisation=outcome.normalisation, units="waves", residual_rms=outcome.residual_rms,
-        fitter=outcome.fitter_kind, fitter_fallback=outcome.fitter_fallback,
+        residual_pv=outcome.residual_pv, fitter=outcome.fitter_kind, fitter_fallback=outcome.fitter_fallback,
         fitter_diagnostics=outcome.diagnostics, aperture=outcome.aperture_record, unwrap_path=outcome.unwrap_path,
         counters=counters, timings_ms={k: v * 1e3 for k, v in outcome.timings_s.items()},
         truth_rms=truth.truth_rms if truth is not None else None,

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wavestack.station.counters import Counters
 from wavestack.station.results import StationResult
 
 _TREND_THRESHOLD = 1e-3  # waves; smaller changes show as steady
@@ -26,13 +27,13 @@ class LiveSnapshot:
     results_per_s: float
     latency_p50_ms: float
     latency_p99_ms: float
-    acquired: int
-    dropped: int
+    counters: Counters | None  # frames and sets, as of the last result
     aperture: str
     fitter: str
     leading: tuple[tuple[int, float, float], ...]  # (index, value, change over the window), waves
     truth_error_rms: float | None
     last_reason: str | None
+    residual: tuple[float, float] | None = None  # (rms, pv) of the last valid result, waves
 
 
 class LiveStats:
@@ -55,6 +56,7 @@ class LiveStats:
         self._valid = 0
         self._last: StationResult | None = None
         self._last_reason: str | None = None
+        self._residual: tuple[float, float] | None = None
 
     def add(self, result: StationResult, now_ns: int) -> None:
         """Account for one result received at host time ``now_ns``."""
@@ -64,6 +66,7 @@ class LiveStats:
         if result.valid:
             self._valid += 1
             self._coefficients.append(result.coefficients)
+            self._residual = (result.residual_rms, result.residual_pv)
         else:
             self._last_reason = result.reason
         self._last = result
@@ -91,9 +94,9 @@ class LiveStats:
             results=self._count, valid=self._valid, results_per_s=rate,
             latency_p50_ms=float(np.nanpercentile(latencies, 50)) if np.isfinite(latencies).any() else math.nan,
             latency_p99_ms=float(np.nanpercentile(latencies, 99)) if np.isfinite(latencies).any() else math.nan,
-            acquired=last.counters.acquired if last else 0, dropped=last.counters.dropped if last else 0,
-            aperture=aperture, fitter=fitter, leading=leading,
+            counters=last.counters if last else None, aperture=aperture, fitter=fitter, leading=leading,
             truth_error_rms=last.truth_error_rms if last else None, last_reason=self._last_reason,
+            residual=self._residual,
         )
 
 
@@ -109,14 +112,27 @@ def render_live_view(snapshot: LiveSnapshot, ordering: str) -> list[str]:
     lines = [
         f"results {s.results} ({s.valid} valid)  {s.results_per_s:5.1f}/s  "
         f"latency p50 {s.latency_p50_ms:6.1f} ms  p99 {s.latency_p99_ms:6.1f} ms",
-        f"frames acquired {s.acquired}  dropped {s.dropped}",
+        *counter_lines(s.counters),
         f"aperture {s.aperture}   fitter {s.fitter}",
     ]
     if s.leading:
         terms = "  ".join(f"Z{j}={value:+.4f}{_trend(change)}" for j, value, change in s.leading)
         lines.append(f"waves ({ordering}): {terms}")
+    if s.residual is not None:
+        lines.append(f"fit residual: rms {s.residual[0]:.4f}  pv {s.residual[1]:.4f} waves")
     if s.truth_error_rms is not None:
         lines.append(f"error against the simulated truth: {s.truth_error_rms:.4f} waves rms")
     if s.last_reason:
         lines.append(f"last invalid: {s.last_reason}")
     return lines
+
+
+def counter_lines(counters: Counters | None) -> list[str]:
+    """Frames and sets, each as its invariant: ``acquired = processed + dropped + pending``."""
+    if counters is None:
+        return ["frames acquired 0", "sets assembled 0"]
+    f, c = counters.frames, counters.sets
+    return [f"frames acquired {f.acquired} = {f.processed} in processed sets + {f.dropped} dropped + "
+            f"{f.pending} pending",
+            f"sets of {counters.frames_per_set} assembled {c.assembled} = {c.processed} processed + "
+            f"{c.dropped} dropped + {c.pending} pending"]

@@ -6,6 +6,13 @@ per update, and holds the last safe command on an invalid or stale result. Only 
 forwards is sent. The heartbeat is sent from the result loop, so it stops when the pipeline stalls
 and the PLC's watchdog sees a dead host. A PLC error never stops the station: it is reported with
 the result, and the next cycle tries again.
+
+The output is *armed* by the first valid, fresh result. Until then results are held by the output
+itself, at INFO level (:func:`start_up_hold` says why): on a normal start the first result is stale
+because the first aperture detection and fitter take over a second (1.26 s measured on the default
+station), and holding it is right but no fault. From the first fresh result on, every result
+passes the safety stage, whose WARNING on a stale or invalid result is then a real fault; a lost
+device always goes to the stage, armed or not.
 """
 
 from __future__ import annotations
@@ -23,10 +30,50 @@ from wavestack.drivers.plc import PolishingLink
 from wavestack.drivers.safety import SafetyLimits, SafetyStage
 from wavestack.config import OutputSettings
 from wavestack.station.results import Heartbeat, OutputRecord, SentCommand, StationResult
+from wavestack.pipeline import wavefront_to_surface, waves_to_nm
 
 logger = logging.getLogger(__name__)
 
 _MAX_COMMAND_ID = 0xFFFF
+
+
+def start_up_hold(*, valid: bool, has_request: bool, age_s: float, max_age_s: float) -> tuple[str, str] | None:
+    """Why a result is held while the output is not armed yet, or None when it arms the output (pure).
+
+    Parameters
+    ----------
+    valid : bool
+        The result is valid.
+    has_request : bool
+        It carries coefficients.
+    age_s : float
+        From the measurement to now, s.
+    max_age_s : float
+        The safety stage's limit on ``age_s``.
+
+    Returns
+    -------
+    (status, reason) or None
+        ``status`` in the safety stage's words (``"INVALID|HELD|NOT_ARMED"``, ``"STALE|HELD|NOT_ARMED"``)
+        and why; None for a valid result with coefficients measured at most ``max_age_s`` ago.
+
+    Examples
+    --------
+    >>> start_up_hold(valid=True, has_request=True, age_s=1.3, max_age_s=1.0)
+    ('STALE|HELD|NOT_ARMED', 'output not armed yet: first result measured 1.3 s ago, max_age_s=1')
+    >>> start_up_hold(valid=True, has_request=True, age_s=0.05, max_age_s=1.0) is None
+    True
+    """
+    flags, reasons = [], []
+    if not (valid and has_request):
+        flags.append("INVALID")
+        reasons.append("result invalid")
+    if not age_s <= max_age_s:  # NaN is not fresh either
+        flags.append("STALE")
+        reasons.append(f"first result measured {age_s:.3g} s ago, max_age_s={max_age_s:g}")
+    if not flags:
+        return None
+    return "|".join([*flags, "HELD", "NOT_ARMED"]), "output not armed yet: " + "; ".join(reasons)
 
 
 class PlcOutput:
@@ -51,10 +98,14 @@ class PlcOutput:
         self._link = link
         self._settings = settings
         self._n_terms = n_terms
-        self._scale_nm = wavelength_nm * settings.surface_factor * settings.gain
+        # removal (surface nm) per wave of measured wavefront
+        self._scale_nm = wavefront_to_surface(waves_to_nm(1.0, wavelength_nm), settings.surface_factor) * settings.gain
         self._timeout_s = timeout_s
         self._command_id = 0
-        self._armed = False
+        self._max_age_s = max_age_s
+        self._heartbeat_started = False
+        self._output_armed = False  # by the first valid fresh result (see the module notes)
+        self._hold_logged = False
         self.stage = SafetyStage(SafetyLimits(
             lower=np.full(n_terms, -settings.max_removal_nm), upper=np.full(n_terms, settings.max_removal_nm),
             max_step=np.full(n_terms, settings.max_step_nm), max_age_s=max_age_s, invalid_action="hold",
@@ -80,10 +131,11 @@ class PlcOutput:
         for this run (a stalled host must not re-arm its own watchdog) and the results carry it.
         """
         try:
-            if not self._armed and self._command_id == 0 and self._link.read_status(self._timeout_s).watchdog_tripped:
+            if not self._heartbeat_started and self._command_id == 0 \
+                    and self._link.read_status(self._timeout_s).watchdog_tripped:
                 logger.info("PLC watchdog tripped during start-up (before any command); re-arming it once")
                 self._link.rearm(self._timeout_s)
-            self._armed = True
+            self._heartbeat_started = True
             status = self._link.heartbeat(self._timeout_s)
         except DeviceError as error:
             logger.warning("PLC heartbeat failed: %s", error)
@@ -105,20 +157,41 @@ class PlcOutput:
         return OutputRecord(heartbeat, command)
 
     def device_lost(self, reason: str, now_ns: int) -> OutputRecord:
-        """No measurement this cycle (a lost device): the safety stage holds; no heartbeat."""
+        """No measurement this cycle (a lost device): the safety stage holds (a fault, armed or not); no heartbeat."""
         now_s = now_ns * 1e-9
-        return OutputRecord(None, self.publish(None, valid=False, measured_at_s=now_s, now_s=now_s, reason=reason))
+        return OutputRecord(None, self._through_stage(None, valid=False, measured_at_s=now_s, now_s=now_s,
+                                                      reason=reason))
 
     def publish(self, coefficients_waves: NDArray[np.float64] | None, *, valid: bool, measured_at_s: float,
                 now_s: float, reason: str | None) -> SentCommand:
         """Pass one result through the safety stage and send what it forwards.
 
+        Until the first valid fresh result arms the output, a result that would not arm it is held
+        here, without the stage, and logged at INFO once (see :func:`start_up_hold`).
+
         Returns
         -------
         SentCommand
             ``sent``, ``command_id`` (or None), ``status`` (the safety flags, e.g.
-            ``"CLIPPED|RATE_LIMITED"`` or ``"HELD|STALE"``), ``reason`` and ``values_nm``.
+            ``"CLIPPED|RATE_LIMITED"`` or ``"STALE|HELD"``; ``"...|HELD|NOT_ARMED"`` before arming),
+            ``reason`` and ``values_nm``.
         """
+        if not self._output_armed:
+            hold = start_up_hold(valid=valid, has_request=coefficients_waves is not None,
+                                 age_s=now_s - measured_at_s, max_age_s=self._max_age_s)
+            if hold is not None:
+                status, why = hold
+                logger.log(logging.DEBUG if self._hold_logged else logging.INFO, "PLC output held: %s", why)
+                self._hold_logged = True
+                return SentCommand(sent=False, command_id=None, status=status, reason=why,
+                                   values_nm=tuple(float(v) for v in self.stage.last_output))
+            self._output_armed = True
+            logger.info("PLC output armed by the first valid fresh result")
+        return self._through_stage(coefficients_waves, valid=valid, measured_at_s=measured_at_s, now_s=now_s,
+                                   reason=reason)
+
+    def _through_stage(self, coefficients_waves: NDArray[np.float64] | None, *, valid: bool, measured_at_s: float,
+                       now_s: float, reason: str | None) -> SentCommand:
         safe = self.stage.update(self.requested_removal_nm(coefficients_waves), valid=valid,
                                  measured_at_s=measured_at_s, now_s=now_s, reason=reason)
         held = SentCommand(sent=False, command_id=None, status=_flags(safe.status), reason=safe.reason,

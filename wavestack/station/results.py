@@ -11,19 +11,7 @@ import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Union
 
-
-@dataclass(frozen=True)
-class Counters:
-    """Frames and results so far.
-
-    ``acquired`` counts frames the sources produced (gaps in device frame ids included),
-    ``dropped`` frames given up by the rings (a slow stage drops instead of queueing), and
-    ``processed`` the results computed, valid or not.
-    """
-
-    acquired: int
-    processed: int
-    dropped: int
+from wavestack.station.counters import Counters
 
 
 @dataclass(frozen=True)
@@ -181,6 +169,10 @@ class StationResult:
     ordering, normalisation, units : str
     residual_rms : float
         RMS of the fit residual, waves (NaN when invalid).
+    residual_pv : float
+        Peak-to-valley of the fit residual, waves, over the same samples as ``residual_rms``
+        (the fit's grid; Shack-Hartmann: the slope misfit times the pitch, as for the RMS); NaN
+        when invalid.
     fitter : str
         Method of the fitter that ran (``csf-qcm``, ``qr``, ...).
     fitter_fallback : bool
@@ -194,6 +186,7 @@ class StationResult:
     unwrap_path : str or None
         "spatial" or "temporal".
     counters : Counters
+        Frames and sets so far, each adding up exactly (see :class:`Counters`).
     timings_ms : dict
         Milliseconds per stage.
     truth_rms, truth_error_rms : float or None
@@ -215,6 +208,7 @@ class StationResult:
     normalisation: str
     units: str
     residual_rms: float
+    residual_pv: float
     fitter: str | None
     fitter_fallback: bool
     fitter_diagnostics: FitterDiagnostics | None
@@ -232,8 +226,8 @@ class StationResult:
         """A result without a measurement (a lost device, a template row): no frames, no fit."""
         return cls(index=index, frame_ids=(), exposure_time_ns=exposure_time_ns, latency_ms=0.0, valid=False,
                    reason=reason, coefficients=(), ordering=ordering, normalisation="rms", units="waves",
-                   residual_rms=float("nan"), fitter=None, fitter_fallback=False, fitter_diagnostics=None,
-                   aperture=None, unwrap_path=None, counters=counters)
+                   residual_rms=float("nan"), residual_pv=float("nan"), fitter=None, fitter_fallback=False,
+                   fitter_diagnostics=None, aperture=None, unwrap_path=None, counters=counters)
 
     @property
     def aperture_changed(self) -> bool:
@@ -245,7 +239,7 @@ class StationResult:
         values: dict[str, Any] = {f.name: getattr(self, f.name) for f in fields(self)}
         values["frame_ids"] = list(self.frame_ids)
         values["coefficients"] = list(self.coefficients)
-        values["counters"] = asdict(self.counters)
+        values["counters"] = self.counters.to_json()
         values["timings_ms"] = dict(self.timings_ms)
         values["fitter_diagnostics"] = {} if self.fitter_diagnostics is None else self.fitter_diagnostics.to_json()
         values["aperture"] = {} if self.aperture is None else self.aperture.to_json()

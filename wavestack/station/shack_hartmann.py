@@ -95,6 +95,8 @@ class SlopeOutcome:
         Noll from j = 1 (piston 0), unit RMS over the configured pupil disk, waves.
     residual_rms : float
         RMS of the slope misfit times the pitch: waves of wavefront across one lenslet (NaN when none).
+    residual_pv : float
+        Peak-to-valley of the same misfit (both slope components) times the pitch, waves (NaN when none).
     diagnostics : ReconstructorDiagnostics or None
     aperture_record : ApertureRecord or None
         The lit-lenslet set the result records as its aperture.
@@ -110,6 +112,7 @@ class SlopeOutcome:
     reason: str | None
     coefficients_waves: NDArray[np.float64] | None = None
     residual_rms: float = math.nan
+    residual_pv: float = math.nan
     diagnostics: ReconstructorDiagnostics | None = None
     aperture_record: ApertureRecord | None = None
     aperture_changed: bool = False
@@ -292,8 +295,10 @@ class SlopeProcessor:
         misfit = np.concatenate([slope_x[lit] - model_x[lit], slope_y[lit] - model_y[lit]])
         # slope residual (waves per pixel) times the pitch: waves of wavefront across one lenslet
         residual = float(np.sqrt(np.mean(misfit ** 2))) * self.settings.pitch_px
+        residual_pv = float(misfit.max() - misfit.min()) * self.settings.pitch_px
         timings["reconstruct"] = time.perf_counter() - tick
-        return SlopeOutcome(True, None, coefficients, residual_rms=residual, diagnostics=diagnostics,
+        return SlopeOutcome(True, None, coefficients, residual_rms=residual, residual_pv=residual_pv,
+                            diagnostics=diagnostics,
                             aperture_changed=changed, aperture_record=record, timings_s=timings, lenslets=lenslets)
 
     # ------------------------------------------------------------------ stages

@@ -14,6 +14,9 @@ fitter builds on the fitter cache's worker. On a simulated camera the devices br
 
 A device lost while running does not end the run: the result says so (invalid, never forwarded),
 the station reopens the camera with a capped back-off, re-applies its configuration and goes on.
+The lost connection's source is retired (what it still held counts as dropped) and a new source
+counts on from there, so the run's frame and set counters
+(:class:`~wavestack.station.counters.Counters`) add up across reconnects.
 """
 
 from __future__ import annotations
@@ -28,11 +31,12 @@ import numpy as np
 from wavestack.config import StationConfig
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout
 from wavestack.drivers.frames import Frame
+from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
 from wavestack.station.devices import StationDevices, configure_camera, phase_steps_rad
 from wavestack.station.interferometer import SetProcessor
 from wavestack.station.outputs import PlcOutput
-from wavestack.station.results import Counters, StationResult, json_ready
+from wavestack.station.results import StationResult, json_ready
 from wavestack.station.shack_hartmann import SlopeOutcome, SlopeProcessor
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 
@@ -104,7 +108,8 @@ class Station:
         self._config = config
         self._devices = devices
         self.processor = build_processor(config)
-        self._source = self._make_source()
+        self._source: CarrierSource | PhaseStepSource | None = self._make_source()
+        self._retired = Counters.zero(self._source.frames_per_set)  # sources of lost connections
         self._output: PlcOutput | None = None
         if devices.link is not None and config.plc is not None:
             self._output = PlcOutput(devices.link, config.outputs, config.plc.link.n_terms,
@@ -124,7 +129,8 @@ class Station:
 
     def close(self) -> None:
         """Stop acquisition and the fitter worker; idempotent."""
-        self._source.stop()
+        if self._source is not None:
+            self._source.stop()
         self.processor.close()
 
     # ------------------------------------------------------------------ the loop
@@ -143,14 +149,15 @@ class Station:
         tally = _Tally()
         index = 0
         backoff_s = 0.05
-        self._source.start()
+        if self._source is not None:
+            self._source.start()
         while not stop.is_set():
             if max_results is not None and index >= max_results:
                 break
             if duration_s is not None and time.monotonic() - started >= duration_s:
                 break
             try:
-                frames = self._source.read_set(self._config.station.frame_timeout_s)
+                frames = self._read_set()
             except (DeviceTimeout, DeviceDisconnected, DeviceError) as error:
                 result = self._device_lost(index, error)
                 on_result(CycleRecord(result))
@@ -164,8 +171,12 @@ class Station:
             on_result(record)
             index += 1
             tally.add(record.result)
-        source = self._source.counters()
-        return tally.summary(index, time.monotonic() - started, Counters(source.acquired, index, source.dropped))
+        return tally.summary(index, time.monotonic() - started, self._counters())
+
+    def _read_set(self) -> tuple[Frame, ...]:
+        if self._source is None:
+            raise DeviceDisconnected(self._devices.camera.name, "camera not reconnected yet")
+        return self._source.read_set(self._config.station.frame_timeout_s)
 
     def _cycle(self, index: int, frames: tuple[Frame, ...]) -> CycleRecord:
         """One set, one way: outcome -> result -> output -> the record of the cycle."""
@@ -174,14 +185,18 @@ class Station:
         outcome = self.processor.process([f.pixels for f in frames])
         errors = check.compare(truth, outcome) if check is not None and truth is not None else None
         result = make_result(index, frames, outcome, ordering=self._config.processing.ordering,
-                             counters=self._counters(index + 1), now_ns=time.time_ns(), truth=errors)
+                             counters=self._counters(), now_ns=time.time_ns(), truth=errors)
         sent = self._output.send(result) if self._output is not None else None
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
                            outcome.lenslets if isinstance(outcome, SlopeOutcome) else None)
 
     def _recover(self, stop: threading.Event, wait_s: float) -> None:
-        """Reopen the camera after a loss and restart acquisition; the caller backs off on failure."""
-        self._source.stop()
+        """Reopen the camera after a loss and restart acquisition; the caller backs off on failure.
+
+        The lost source is read no more: what it still held is counted dropped, and a new source
+        starts once the camera is back.
+        """
+        self._retire_source()
         if stop.wait(wait_s):
             return
         camera = self._devices.camera
@@ -196,13 +211,25 @@ class Station:
 
     # ------------------------------------------------------------------ records
 
-    def _counters(self, processed: int) -> Counters:
-        source = self._source.counters()
-        return Counters(source.acquired, processed, source.dropped)
+    def _retire_source(self) -> None:
+        source, self._source = self._source, None
+        if source is None:
+            return
+        try:
+            source.stop()
+        except DeviceError as error:  # a camera already gone may not acknowledge the stop
+            logger.info("stopping the lost source: %s", error)
+        self._retired = self._retired.plus(source.counters().retired())
+
+    def _counters(self) -> Counters:
+        """Frames and sets this run: retired sources and the current one (each adding up exactly)."""
+        if self._source is None:
+            return self._retired
+        return self._retired.plus(self._source.counters())
 
     def _device_lost(self, index: int, error: DeviceError) -> StationResult:
         now_ns = time.time_ns()
-        result = StationResult.invalid(index, f"device: {error}", self._counters(index + 1),
+        result = StationResult.invalid(index, f"device: {error}", self._counters(),
                                        ordering=self._config.processing.ordering, exposure_time_ns=now_ns)
         return with_output(result, self._output.device_lost(f"device: {error}", now_ns)
                            if self._output is not None else None)

@@ -4,45 +4,21 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Iterator
-from contextlib import ExitStack, contextmanager
+from contextlib import contextmanager
 
 import pytest
 import serial
 
 from wavestack.drivers import DeviceDisconnected, DeviceTimeout, LimitError, ProtocolError
 from wavestack.drivers.mdt693b import MDT693B
-from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality, PtyBridge
-from wavestack.simulators import attach_simulated_device, register_serial_simulators
+from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality
+from wavestack.simulators import attach_simulated_device
 
 WIRE_RESOLUTION_V = 0.005  # the driver sends two decimals, so a set voltage is within half a hundredth
 ECHO_GT = MDT693BPersonality(echo=True, prompt=">")
 QUIET_STAR = MDT693BPersonality(echo=False, prompt="*", firmware="1.05", decimals=1)
 
-Connect = Callable[[MDT693BDevice], str]
-
-
-@pytest.fixture(autouse=True)
-def _sim_urls() -> None:
-    register_serial_simulators()
-
-
-@pytest.fixture(params=["sim", "pty"])
-def transport(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
-
-
-@pytest.fixture
-def connect(transport: str) -> Iterator[Connect]:
-    """Serve a device on the transport under test; returns the URL a driver opens."""
-    with ExitStack() as stack:
-        def serve(device: MDT693BDevice) -> str:
-            if transport == "sim":
-                name = f"dev{id(device)}"
-                stack.enter_context(attach_simulated_device(name, device))
-                return f"sim://{device.personality.model.lower()}/{name}"
-            return stack.enter_context(PtyBridge(device)).port_path
-
-        yield serve
+Connect = Callable[[MDT693BDevice], str]  # the `connect` fixture (conftest.py)
 
 
 @contextmanager
@@ -64,7 +40,10 @@ def test_open_reads_identity_and_switches_echo_off(connect: Connect, personality
         assert piezo.identity.firmware == personality.firmware
         assert piezo.vlimit_v == personality.vlimit_v
         assert device.echo is False
-        assert device.commands[:4] == ("echo=0", "id?", "vlimit?", "xmin?")
+        # after a '*' prompt (firmware 1.05, or the MDT693A command set) cm? tells the command set
+        asked = ("echo=0", "cm?", "id?", "vlimit?") if personality.prompt == "*" else ("echo=0", "id?", "vlimit?")
+        assert device.commands[:len(asked)] == asked
+        assert piezo.command_set == "mdt693b"
 
 
 @pytest.mark.parametrize("personality", [ECHO_GT, QUIET_STAR], ids=["echo-gt", "quiet-star"])

@@ -45,19 +45,19 @@ def make_station() -> PolishingStation:
 
 
 def make_layout(order: str = "CDAB", watchdog_timeout_s: float = LONG_WATCHDOG_S,
-                pass_duration_s: float = 0.0) -> PlcSimLayout:
+                pass_duration_s: float = 0.0, **functions: int) -> PlcSimLayout:
     return PlcSimLayout(unit_id=1, self_check_register=0, self_check_value=CONSTANT, self_check_word_order=order,
                         heartbeat_register=10, rearm_register=11, status_register=20,
                         command_block=(100, 2 + 2 * N_TERMS), output_block=(200, 2 + 2 * N_TERMS),
                         command_word_order=order, output_word_order=order, watchdog_timeout_s=watchdog_timeout_s,
-                        pass_duration_s=pass_duration_s)
+                        pass_duration_s=pass_duration_s, **functions)
 
 
-def make_map(order: str = "CDAB") -> RegisterMap:
+def make_map(order: str = "CDAB", **functions: int) -> RegisterMap:
     return RegisterMap.build(unit_id=1, word_order=order, self_check_register=0,  # type: ignore[arg-type]
                              self_check_value=CONSTANT, heartbeat_register=10, rearm_register=11,
                              status_register=20, command_block=(100, 2 + 2 * N_TERMS),
-                             output_block=(200, 2 + 2 * N_TERMS))
+                             output_block=(200, 2 + 2 * N_TERMS), **functions)
 
 
 @contextmanager
@@ -276,8 +276,9 @@ def test_read_only_and_unmapped_registers_answer_exception_2_on_the_wire() -> No
                 reply = client.write_register(address, 1, device_id=1)
                 assert reply.isError() and reply.exception_code == 2, address
             assert client.read_holding_registers(150, count=1, device_id=1).exception_code == 2
-            holding = client.read_holding_registers(0, count=2, device_id=1).registers
-            assert client.read_input_registers(0, count=2, device_id=1).registers == holding  # shared memory
+            assert len(client.read_holding_registers(0, count=2, device_id=1).registers) == 2
+            # the map reads holding registers: this PLC serves no FC4 (tests/simulators/plc/test_register_map_access.py)
+            assert client.read_input_registers(0, count=2, device_id=1).exception_code == 1
         finally:
             client.close()
 
@@ -342,3 +343,20 @@ def test_arguments_are_checked_before_any_io() -> None:
         PolishingLink("127.0.0.1", 502, make_map(), TIMING).heartbeat(timeout_s=0.0)
     with pytest.raises(ValueError, match="io_timeout_s"):
         LinkTiming(io_timeout_s=0.0)
+
+
+@pytest.mark.parametrize(("read", "single"), [(3, 6), (4, 16), (3, 16), (4, 6)])
+def test_the_driver_speaks_each_function_code_pair_a_map_may_name(read: int, single: int) -> None:
+    """End to end with a simulator that refuses every function code its map does not name."""
+    functions = {"read_function": read, "single_write_function": single}
+    with PlcSimulator(make_layout(watchdog_timeout_s=1.0, **functions), make_station()) as sim:
+        with PolishingLink("127.0.0.1", sim.port, make_map(**functions), TIMING) as link:
+            ready(link)
+            link.heartbeat(timeout_s=1.0)
+            ack = link.send_removal(4, REMOVAL_NM, passes=1, timeout_s=2.0)
+            assert ack.status.last_accepted_id == 4 and link.read_outputs(timeout_s=1.0).active_command_id == 4
+            assert wait_for(lambda: sim.watchdog_state is WatchdogState.TRIPPED)
+            link.rearm(timeout_s=1.0)
+            assert sim.watchdog_state is WatchdogState.RUNNING
+        assert {record.function_code for record in sim.requests} == {read, single, 16}
+

@@ -69,6 +69,21 @@ def drain(camera: U3VCamera) -> list[Frame]:
             return frames
 
 
+def read_past_fault(camera: U3VCamera, fault_seen: Any) -> list[Frame]:
+    """Frames until the reader thread has met a one-shot fault, then one more frame taken after it.
+
+    A frame ring may hold frames acquired before the fault switch was set (a loaded machine lets
+    the reader run ahead of the test), so a fixed number of reads may never reach the fault.
+    """
+    frames: list[Frame] = []
+    deadline = time.monotonic() + TIMEOUT_S
+    while not fault_seen(camera.counters()):
+        assert time.monotonic() < deadline, f"the fault was not met within {TIMEOUT_S} s"
+        frames.append(camera.read_frame(TIMEOUT_S))
+    frames.append(camera.read_frame(TIMEOUT_S))
+    return frames
+
+
 def reader_threads() -> list[threading.Thread]:
     return [t for t in threading.enumerate() if t.name.startswith("u3v-reader") and t.is_alive()]
 
@@ -213,7 +228,7 @@ def test_bad_block_is_discarded_and_the_next_is_good(fault: str, value: object) 
         camera.start()
         frames = [camera.read_frame(TIMEOUT_S)]
         setattr(device.faults, fault, value)
-        frames += [camera.read_frame(TIMEOUT_S) for _ in range(3)]
+        frames += read_past_fault(camera, lambda counters: counters.discarded_blocks > 0)
         camera.stop()
         frames += drain(camera)
         counters = camera.counters()
@@ -231,7 +246,7 @@ def test_stall_is_cleared_and_streaming_resumes() -> None:
         camera.start()
         frames = [camera.read_frame(TIMEOUT_S)]
         device.faults.stall_next = True
-        frames += [camera.read_frame(TIMEOUT_S) for _ in range(3)]
+        frames += read_past_fault(camera, lambda counters: counters.stalls_cleared > 0)
         camera.stop()
         counters = camera.counters()
     assert counters.stalls_cleared == 1

@@ -427,3 +427,17 @@ def test_fuzz_assembler(transfers: list[bytes]) -> None:
         outcome = assembler.feed(transfer)
         assert outcome is None or isinstance(outcome, (AssembledBlock, DiscardedBlock))
         assert assembler.next_read_size() >= 52
+
+
+def test_sfnc_strings_and_optional_features() -> None:
+    extra = ('<StringReg Name="DeviceVendorName"><Address>0x4</Address><Length>64</Length><AccessMode>RO'
+             '</AccessMode><pPort>Device</pPort></StringReg>'
+             '<IntSwissKnife Name="PayloadSize"><Formula>1</Formula></IntSwissKnife>'  # outside the subset
+             '<StringReg Name="DeviceUserID"><Address>0x184</Address><Length>99999</Length></StringReg>')
+    features = parse_genicam(build_xml(extra=extra), DEV)
+    vendor = features.require("DeviceVendorName", DEV)
+    assert (vendor.kind, vendor.register.address, vendor.register.length, vendor.register.access) == (
+        "string", 0x4, 64, "RO")
+    # optional features outside the subset are left out instead of failing the open
+    assert "PayloadSize" not in features and "DeviceUserID" not in features
+    assert "Width" in features

@@ -8,9 +8,7 @@ not its speckled halo, is found.
 from __future__ import annotations
 
 import dataclasses
-import logging
 import math
-import time
 
 import cv2
 import numpy as np
@@ -24,7 +22,6 @@ from wavestack.pipeline.aperture.detect import DetectionSettings, detect_apertur
 from shared_data import DATA
 
 _DATA = DATA / "psi-mirror-654nm"
-_LOG = logging.getLogger(__name__)
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -181,13 +178,13 @@ def test_keep_all_and_keep_largest() -> None:
 
 
 def test_explicit_threshold_separates_disk_from_halo() -> None:
-    """Three levels: Otsu puts the halo with the disk, an explicit 0.8 does not."""
+    """Three levels: Otsu (the rule asked for by name) puts the halo with the disk, an explicit 0.8 does not."""
     shape = (240, 240)
     disk = _disk(shape, 120, 120, 70)
     halo = _disk(shape, 120, 120, 100) & ~disk
     signal = 1.0 * disk + 0.6 * halo
 
-    otsu = detect_aperture(signal)
+    otsu = detect_aperture(signal, DetectionSettings(rule="otsu"))
     explicit = detect_aperture(signal, DetectionSettings(threshold=0.8))
 
     assert otsu.threshold < 0.6
@@ -199,14 +196,14 @@ def test_explicit_threshold_separates_disk_from_halo() -> None:
 
 
 def test_reported_threshold_is_the_one_applied() -> None:
-    """Without morphology or selection the mask is exactly map > threshold (NaN invalid)."""
+    """Otsu's rule without morphology or selection: the mask is exactly map > threshold (NaN invalid)."""
     rng = np.random.default_rng(2)
     signal = rng.normal(10.0, 1.0, (64, 64))
     signal[:, 32:] += 5.0
     signal[5, 40] = np.nan
     raw = DetectionSettings(
         open_radius_px=0, close_radius_px=0, fill_dropouts_below_px=0, keep="all",
-        min_component_px=1,
+        min_component_px=1, rule="otsu",
     )
     result = detect_aperture(signal, raw)
     with np.errstate(invalid="ignore"):
@@ -362,29 +359,30 @@ def test_tracker_rejects_non_aperture() -> None:
 
 
 def test_real_cycle_finds_the_mirror_not_the_halo(cycle_map: NDArray[np.float64]) -> None:
-    """Image5..10: one simply connected disk of radius ~285 px; the halo is excluded.
+    """Image5..10: one disk of radius ~285 px with its central speck; the halo is excluded.
 
-    Measured: Otsu threshold 41.8 (plateau ~76), minimum enclosing circle centre
-    (388.5, 299.6), radius 288.5 px; half-maximum edges give centre (392, 299.5) and radius
-    284 px -- a 6 x 6 px halo blob glued to the left rim at (100..104, 296..301) by the 2-px
-    closing stretches the enclosing circle by ~4 px. 5 dropouts filled (the 192-px central
-    speck at (303, 391), 191, 70, 60, 26 px), 0 components removed (the opening already
-    removes the halo speckle).
+    Measured with the half-way rule: disk level 75.7, halo 10.0, threshold 42.9; minimum
+    enclosing circle (392.1, 299.2), radius 285.6 px (Otsu's rule: threshold 41.8 and a 6 x 6 px
+    halo blob glued to the left rim by the closing, circle (388.5, 299.6), 288.5 px); half-maximum
+    edges of the bands give (392, 299.5), 283.75 px. The dark central speck at (303, 391) is
+    206 px at the half-way level, above the 200-px fill limit, so it stays as a hole (it was
+    192 px under Otsu's lower threshold and was filled).
     """
     result = detect_aperture(cycle_map)
     aperture = result.aperture
     cx, cy, r = aperture.enclosing_circle()
     edge_cx, edge_cy, edge_r = _half_max_circle(cycle_map, cx, cy)
 
-    assert aperture.topology is Topology.SIMPLY_CONNECTED and aperture.components == 1
-    # Range: the half-maximum radius (284 px) minus 3 px for the threshold sitting above
-    # half maximum, plus up to 8 px for halo pieces attached to the rim.
-    assert edge_r - 3 <= r <= edge_r + 8 and 275 <= r <= 295
-    assert math.hypot(cx - edge_cx, cy - edge_cy) <= 5
+    assert aperture.components == 1
+    # Range: the half-maximum radius of the bands (whole pixels, rounded in) minus 1 px, plus
+    # up to 3 px for the rim's own departures from a circle, which the enclosing circle takes.
+    assert edge_r - 1 <= r <= edge_r + 3 and 275 <= r <= 295
+    assert math.hypot(cx - edge_cx, cy - edge_cy) <= 2
     assert math.hypot(cx - 400, cy - 300) <= 15
-    # The dark central speck is below the threshold but filled.
-    assert cycle_map[303, 391] < result.threshold and aperture.mask[303, 391]
-    assert result.filled_dropouts == 5
+    # The dark central speck is below the threshold, and at this threshold larger than the
+    # fill limit: a hole, not filled.
+    assert cycle_map[303, 391] < result.threshold and not aperture.mask[303, 391]
+    assert aperture.topology is Topology.DOUBLY_CONNECTED
     # The halo ring has pixels above the threshold, yet none is in the aperture.
     rows, cols = np.mgrid[: cycle_map.shape[0], : cycle_map.shape[1]]
     ring = (np.hypot(cols - cx, rows - cy) >= 300) & (np.hypot(cols - cx, rows - cy) <= 380)
@@ -397,8 +395,8 @@ def test_real_tilted_set_gives_the_same_circle(
 ) -> None:
     """Image2282..2287: same mirror circle within a few pixels.
 
-    Measured: threshold 28.5, enclosing circle (393.4, 300.3), radius 287.4 px (cycle set:
-    (388.5, 299.6), 288.5 px); 51 dropouts filled, 2 halo components removed. A 362-px
+    Measured (half-way rule): threshold 29.4, enclosing circle (393.5, 300.7), radius 287.0 px
+    (cycle set: (392.1, 299.2), 285.6 px); 40 dropouts filled, 1 halo component removed. A
     low-modulation blemish at (351, 614) (row, col) is above the 200-px fill limit and stays
     as a hole, so this set is doubly connected with the default settings.
     """
@@ -415,14 +413,14 @@ def test_real_tilted_set_gives_the_same_circle(
     assert relaxed.aperture.topology is Topology.SIMPLY_CONNECTED
 
 
-# ----------------------------------------------------------------------------- speed
+# ----------------------------------------------------------------------------- a large map
 
 
-def test_speed_at_1024(record_property: pytest.RecordProperty) -> None:
-    """Median detection time at 1024^2 against one numpy read (np.max) of the same map.
+def test_detection_at_1024_closes_specks_and_fills_dropouts() -> None:
+    """A 1024^2 map with a speckled halo, pinholes and 49-px dropouts: one simply connected aperture.
 
-    Only a loose bound is asserted (timing on shared CI machines is noisy); the numbers are
-    logged and recorded as test properties.
+    Its speed is measured by ``benchmarks/bench_signal.py``, never here: timed tests on a shared
+    machine fail for reasons that are not the code's.
     """
     rng = np.random.default_rng(3)
     n = 1024
@@ -436,20 +434,8 @@ def test_speed_at_1024(record_property: pytest.RecordProperty) -> None:
     for row, col in rng.uniform(250, 770, (20, 2)):  # 49-px dropouts: filled
         signal[np.hypot(rows - row, cols - col) <= 4] = 0.0
 
-    def median_ms(action: object, repeats: int = 15) -> float:
-        times = []
-        for _ in range(repeats):
-            start = time.perf_counter()
-            action()  # type: ignore[operator]
-            times.append(time.perf_counter() - start)
-        return 1e3 * float(np.median(times))
-
-    result = detect_aperture(signal)  # also a warm-up
+    result = detect_aperture(signal)
     assert result.aperture.topology is Topology.SIMPLY_CONNECTED
     assert result.filled_dropouts == 20
-    memory_ms = median_ms(lambda: np.max(signal))
-    detect_ms = median_ms(lambda: detect_aperture(signal))
-    record_property("memory_pass_ms", memory_ms)
-    record_property("detect_ms", detect_ms)
-    _LOG.info("1024^2 detection %.2f ms, memory pass %.3f ms", detect_ms, memory_ms)
-    assert detect_ms < 250.0
+    # the half-way edge of a unit step at r = 400 beside a halo of mean ~0.17: within a pixel of 400
+    assert abs(np.sqrt(result.aperture.valid_count / np.pi) - 400.0) < 1.0

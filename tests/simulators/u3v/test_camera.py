@@ -280,7 +280,8 @@ def test_manifest_and_xml_describe_working_registers(zipped: bool) -> None:
         assert (fmt >> 24, (fmt >> 16) & 0xFF) == (1, 1)
         root, features = feature_nodes(host)
         assert set(features) == {"Width", "Height", "PixelFormat", "ExposureTime", "TriggerMode",
-                                 "TriggerSoftware", "AcquisitionStart", "AcquisitionStop"}
+                                 "TriggerSoftware", "AcquisitionStart", "AcquisitionStop", "AcquisitionMode",
+                                 "PayloadSize", "TLParamsLocked"}
         pixel_format = root.find(f"{NS}Enumeration[@Name='PixelFormat']")
         entries = {e.get("Name"): int(e.findtext(NS + "Value"), 0) for e in pixel_format.iter(NS + "EnumEntry")}
         assert entries == {"Mono8": MONO8, "Mono12": MONO12, "Mono16": MONO16}
@@ -592,3 +593,65 @@ def test_arbitrary_control_bytes_never_crash_the_device(packet: bytes) -> None:
         assert Host(dev).u32(0) == 0x0001_0000  # and the device still answers
     finally:
         usb.util.dispose_resources(dev)
+
+
+# --- SFNC features a generic GenICam consumer expects ----------------------------------------------
+# Names, node types and categories from the GenICam Standard Features Naming Convention (SFNC 2.6):
+# Device Control (identity strings, DeviceUserID writable), Acquisition Control (AcquisitionMode with
+# Continuous), Transport Layer Control (PayloadSize, read-only; TLParamsLocked, 0/1, which locks the
+# features that change the payload while set). A U3V device's identity strings are the ABRM's
+# (offsets from the protocol sheet).
+ABRM_STRINGS = {"DeviceVendorName": 0x0004, "DeviceModelName": 0x0044, "DeviceFamilyName": 0x0084,
+                "DeviceVersion": 0x00C4, "DeviceManufacturerInfo": 0x0104, "DeviceSerialNumber": 0x0144,
+                "DeviceUserID": 0x0184}
+SFNC_CATEGORIES = {"DeviceControl": set(ABRM_STRINGS), "AcquisitionControl": {"AcquisitionMode"},
+                   "TransportLayerControl": {"PayloadSize", "TLParamsLocked"}}
+
+
+def test_xml_carries_the_sfnc_features_generic_consumers_expect() -> None:
+    settings_ = small_settings(width=9, height=4, model="WaveCam U3V-Sim", manufacturer="wavestack")
+    with plugged(settings_, PatternRenderer(9, 4)) as (_, host):
+        root, features = feature_nodes(host)
+        nodes = {node.get("Name"): node for node in root}
+        categories = {name: {p.text for p in nodes[name].iter(NS + "pFeature")} for name in SFNC_CATEGORIES}
+        for category, members in SFNC_CATEGORIES.items():
+            assert members <= categories[category], category
+            assert category in {p.text for p in nodes["Root"].iter(NS + "pFeature")}
+        # identity: StringReg nodes on the ABRM strings, 64 bytes, read-only but for DeviceUserID
+        for name, offset in ABRM_STRINGS.items():
+            node = nodes[name]
+            assert node.tag == NS + "StringReg" and int(node.findtext(NS + "Address"), 0) == offset
+            assert int(node.findtext(NS + "Length")) == 64 and node.findtext(NS + "pPort") == "Device"
+            assert node.findtext(NS + "AccessMode") == ("RW" if name == "DeviceUserID" else "RO")
+        text = {name: host.read(offset, 64).rstrip(b"\0").decode() for name, offset in ABRM_STRINGS.items()}
+        assert (text["DeviceVendorName"], text["DeviceModelName"], text["DeviceSerialNumber"]) == \
+            ("wavestack", "WaveCam U3V-Sim", "SIM-A")
+        assert host.writemem(ABRM_STRINGS["DeviceUserID"], b"bench-1".ljust(64, b"\0")).status == SUCCESS
+        assert host.read(ABRM_STRINGS["DeviceUserID"], 7) == b"bench-1"
+        # PayloadSize: read-only Integer, width * height * bytes per pixel of the format in force
+        assert nodes["PayloadSize"].tag == NS + "Integer" and features["PayloadSize"][2] == "RO"
+        assert host.u32(features["PayloadSize"][0]) == 9 * 4 * 2  # Mono12 travels in two bytes
+        assert host.write_u32(features["PixelFormat"][0], MONO8) == SUCCESS
+        assert host.u32(features["PayloadSize"][0]) == 9 * 4 * 1
+        assert host.write_u32(features["PayloadSize"][0], 1) == WRITE_PROTECT
+        # AcquisitionMode: Enumeration with Continuous, which it reads as
+        mode = nodes["AcquisitionMode"]
+        entries = {e.get("Name"): int(e.findtext(NS + "Value"), 0) for e in mode.iter(NS + "EnumEntry")}
+        assert mode.tag == NS + "Enumeration" and "Continuous" in entries and features["AcquisitionMode"][2] == "RW"
+        assert host.u32(features["AcquisitionMode"][0]) == entries["Continuous"]
+        assert host.write_u32(features["AcquisitionMode"][0], max(entries.values()) + 1) == INVALID_PARAMETER
+        # TLParamsLocked: Integer 0..1; while 1, the features that change the payload refuse writes
+        locked = nodes["TLParamsLocked"]
+        assert locked.tag == NS + "Integer" and (locked.findtext(NS + "Min"), locked.findtext(NS + "Max")) == ("0", "1")
+        for name in ("Width", "Height", "PixelFormat"):
+            assert nodes[name].findtext(NS + "pIsLocked") == "TLParamsLocked"
+        address = features["TLParamsLocked"][0]
+        assert host.u32(address) == 0 and host.write_u32(address, 2) == INVALID_PARAMETER
+        assert host.write_u32(address, 1) == SUCCESS
+        assert host.write_u32(features["Width"][0], 8) == ACCESS_DENIED
+        assert host.write_u32(features["PixelFormat"][0], MONO16) == ACCESS_DENIED
+        assert host.write_u32(features["AcquisitionMode"][0],
+                              entries["Continuous"]) == SUCCESS  # not a transport-layer parameter
+        assert host.write_u32(address, 0) == SUCCESS and host.write_u32(features["Width"][0], 8) == SUCCESS
+        assert host.u32(features["PayloadSize"][0]) == 8 * 4 * 1
+
