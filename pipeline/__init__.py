@@ -54,6 +54,7 @@ from .fit import (
     save_fitter,
 )
 from .formats import InputError, load_map, load_mask, read_datx, read_frame, read_frame_set, read_metropro_dat
+from .formats import MeasuredMap, read_4d, read_measured_map, unsupported_reason
 from .mapping import csf_qcm_map
 from .phase import (
     MeasuredWavefront,
@@ -143,6 +144,7 @@ __all__ = [
     "FitterDiagnostics",
     "FitterStore",
     "IllConditionedBasis",
+    "MeasuredMap",
     "InputError",
     "InvalidFrame",
     "MeasuredWavefront",
@@ -178,9 +180,11 @@ __all__ = [
     "noll_to_nm",
     "normalisation_factor",
     "phase_from_frames",
+    "read_4d",
     "read_datx",
     "read_frame",
     "read_frame_set",
+    "read_measured_map",
     "read_metropro_dat",
     "remove_physical_terms",
     "save_fitter",
@@ -199,4 +203,5 @@ __all__ = [
     "wavefront_to_surface",
     "surface_to_wavefront",
     "WavefrontUnits",
+    "unsupported_reason",
 ]

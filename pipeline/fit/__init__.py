@@ -4,6 +4,7 @@ terms.
 
 from __future__ import annotations
 
+from .auto import AUTO, AUTO_MAX_NOISE_GAIN
 from .build import available_methods, build_fitter
 from .conditioning import gram_condition, noise_gain, normalised_gram
 from .fitter import Fitter
@@ -16,11 +17,14 @@ from .methods import (
     mapped_columns,
 )
 from .normal_equations import IllConditionedBasis
+from .orthonormal import MAX_GRAM_CONDITION
 from .physical_terms import PhysicalTerms, physical_term_names, remove_physical_terms
 from .results import FitBasis, FitResult, FitterDiagnostics, InvalidFrame, Pupil
 from .store import FitterStore, fitter_key, load_fitter, save_fitter
 
 __all__ = [
+    "AUTO",
+    "AUTO_MAX_NOISE_GAIN",
     "FitBasis",
     "FitResult",
     "Fitter",
@@ -29,6 +33,7 @@ __all__ = [
     "IllConditionedBasis",
     "InvalidFrame",
     "MAPPED_METHODS",
+    "MAX_GRAM_CONDITION",
     "METHODS",
     "MappingOptions",
     "PhysicalTerms",

@@ -30,15 +30,17 @@ import scipy.linalg
 from numpy.typing import DTypeLike, NDArray
 
 from .._checks import is_integer, one_of
-from ..aperture import Aperture, UnsupportedAperture
+from ..aperture import Aperture, Topology, UnsupportedAperture
 from ..zernike import default_normalisation, mode_list, normalisation_factor
+from .auto import AUTO, BuildOne, advised_error, build_auto
 from .conditioning import gram_condition, noise_gain, normalised_gram
 from .fitter import Fitter
 from .methods import METHODS, MappingOptions, Samples, method_columns
-from .normal_equations import NormalEquations
+from .normal_equations import IllConditionedBasis, NormalEquations
 from .orthonormal import factor_quality, orthonormalise
 from .physical_terms import physical_term_basis, physical_term_names
 from .results import FitBasis, FitterDiagnostics, Pupil
+from .sampling import aperture_of, fit_mask_of, pupil_of, samples_of
 
 if TYPE_CHECKING:
     from ..mapping import CanonicalMap
@@ -48,8 +50,6 @@ logger = logging.getLogger(__name__)
 _ORDERINGS = ("noll", "ansi", "fringe")
 _DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 _FALLBACKS = (None, "qr")
-# A user-given pupil may cut the aperture; samples farther out than this are left out.
-_PUPIL_TOLERANCE = 1e-9
 
 # Storage order of the operator, chosen for the one product a refit makes (``w @ A``), from
 # OpenBLAS gemv on this project's machine, N = 630,548 samples, one thread, median ms
@@ -62,8 +62,8 @@ _PIXEL_MAJOR_MAX_COLUMNS = 48
 
 
 def available_methods() -> tuple[str, ...]:
-    """Names accepted by ``build_fitter(method=...)``."""
-    return METHODS
+    """Names accepted by ``build_fitter(method=...)``: ``"auto"`` and the concrete methods."""
+    return (AUTO, *METHODS)
 
 
 def _stored_operator(orthonormal: NDArray[np.float64], dtype: np.dtype) -> NDArray[np.floating]:
@@ -77,46 +77,10 @@ def _stored_operator(orthonormal: NDArray[np.float64], dtype: np.dtype) -> NDArr
     return np.ascontiguousarray(orthonormal.T, dtype=dtype).T
 
 
-def _aperture_of(aperture_or_mask: Aperture | NDArray) -> Aperture:
-    if isinstance(aperture_or_mask, Aperture):
-        return aperture_or_mask
-    return Aperture.from_mask(np.asarray(aperture_or_mask))
-
-
-def _pupil_of(aperture: Aperture, pupil: Pupil | tuple[float, float, float] | None) -> Pupil:
-    if pupil is None:
-        return Pupil(*aperture.enclosing_circle())
-    if not isinstance(pupil, Pupil):
-        values = tuple(pupil)
-        if len(values) != 3:
-            raise ValueError(f"pupil: expected (cx, cy, r) in pixels, got {pupil!r}")
-        pupil = Pupil(*(float(v) for v in values))
-    if not (np.isfinite([pupil.cx, pupil.cy, pupil.radius]).all() and pupil.radius > 0):
-        raise ValueError(f"pupil: expected finite centre and a radius > 0 pixels, got {pupil}")
-    return pupil
-
-
-def _samples_of(aperture: Aperture, pupil: Pupil, user_pupil: bool) -> Samples:
-    rows, cols = np.nonzero(aperture.mask)
-    x = (cols - pupil.cx) / pupil.radius
-    y = (pupil.cy - rows) / pupil.radius
-    excluded = 0
-    if user_pupil:
-        inside = x * x + y * y <= 1.0 + _PUPIL_TOLERANCE
-        excluded = int(inside.size - np.count_nonzero(inside))
-        if excluded:
-            logger.warning("%d valid pixels lie outside the given pupil and are left out", excluded)
-            rows, cols, x, y = rows[inside], cols[inside], x[inside], y[inside]
-    if rows.size == 0:
-        raise ValueError(f"pupil: no valid pixel of the aperture lies inside {pupil}")
-    flat = (rows * aperture.shape[1] + cols).astype(np.intp)
-    return Samples(flat, rows, cols, x, y, excluded)
-
-
 def _check_arguments(
     method: str, modes: int, ordering: str, dtype: np.dtype, fallback: str | None
 ) -> None:
-    one_of(method, "method", METHODS, voice="expected")
+    one_of(method, "method", (AUTO, *METHODS), voice="expected")
     if not is_integer(modes) or modes < 1:
         raise ValueError(f"modes: expected a positive integer, got {modes!r}")
     one_of(ordering, "ordering", _ORDERINGS, voice="expected")
@@ -156,6 +120,7 @@ def build_fitter(
     mesh_vertices: int = 15000,
     angular_balance: bool = True,
     fallback: str | None = None,
+    fit_mask: NDArray | None = None,
 ) -> Fitter:
     """Precompute everything needed to refit frames on one aperture.
 
@@ -163,7 +128,11 @@ def build_fitter(
     ----------
     aperture_or_mask : Aperture or ndarray of shape (rows, cols)
         The aperture, or a mask (non-zero = valid) to build it from.
-    method : {"circle", "qr", "conformal", "csf-qcm"}
+    method : {"circle", "qr", "conformal", "csf-qcm", "auto"}
+        ``auto``: ``circle`` where the circle basis is well conditioned on the aperture (noise
+        gain at most ``AUTO_MAX_NOISE_GAIN``), else ``csf-qcm`` (``qr`` for an aperture no map
+        can handle); ``diagnostics.method`` is the method chosen and
+        ``diagnostics.method_reason`` says why (:mod:`wavestack.pipeline.fit.auto`).
         ``circle``: Zernike polynomials over the pupil circle. ``qr``: the same modes
         orthonormalised over the samples; ``FitResult.circle_coefficients`` converts back.
         ``csf-qcm``: Zernike (or annular Zernike) polynomials on the CSF-QCM map of the aperture
@@ -197,6 +166,12 @@ def build_fitter(
     fallback : {None, "qr"}
         With "qr", an aperture a mapped method cannot handle (several components or holes)
         gives a ``qr`` fitter whose ``diagnostics.fallback`` says why, instead of an error.
+    fit_mask : ndarray of shape (rows, cols), optional
+        The pixels to fit (non-zero = fit), when they are not the aperture's: a measured map's
+        own valid pixels, with drop-outs and isolated pixels, while the aperture is its clean
+        outline. Default: the aperture's mask. The aperture still gives the default pupil and
+        the domain of a mapped method's map; fitted pixels outside that domain take the map's
+        extrapolation from the nearest mesh triangle, clamped into the unit disk.
 
     Returns
     -------
@@ -210,7 +185,8 @@ def build_fitter(
     UnsupportedAperture
         For a mapped method on an aperture with several components or holes, without fallback.
     IllConditionedBasis
-        If the modes are linearly dependent on the samples.
+        If the modes are linearly dependent on the samples, or kappa(G) exceeds 2**52; the
+        message (and ``advice``) names only remedies that were checked to build here.
 
     Examples
     --------
@@ -243,17 +219,36 @@ def build_fitter(
         modes=int(modes), ordering=ordering, pupil=pupil, dtype=dtype,
         normalisation=normalisation, remove=remove, options=options,
     )
-    aperture = _aperture_of(aperture_or_mask)
+    aperture = aperture_of(aperture_or_mask)
+    settings["fit_mask"] = fit_mask_of(fit_mask, aperture)
+
+    def build(concrete: str, **overrides: object) -> Fitter:
+        return _build(aperture, concrete, **{**settings, **overrides})
+
     try:
-        return _build(aperture, method, **settings)
+        if method == AUTO:
+            return build_auto(build, aperture)
+        return _with_fallback(build, aperture, method, fallback)
+    except IllConditionedBasis as error:
+        if error.advice:
+            raise
+        failed = method
+        if method == AUTO:  # what failed is the method auto chose
+            failed = "qr" if aperture.topology is Topology.UNSUPPORTED else "csf-qcm"
+        raise advised_error(error, build, failed, aperture, int(modes)) from None
+
+
+def _with_fallback(build: BuildOne, aperture: Aperture, method: str, fallback: str | None) -> Fitter:
+    """``build(method)``, or with ``fallback="qr"`` the ``qr`` fitter where a map cannot be made."""
+    try:
+        return build(method)
     except UnsupportedAperture as error:
         if fallback is None or method not in ("conformal", "csf-qcm"):
             raise
         logger.warning("%s cannot map this aperture (%s); falling back to qr", method, error)
-        fitter = _build(aperture, "qr", **settings)
+        fitter = build("qr")
         fitter.diagnostics = dataclasses.replace(fitter.diagnostics, fallback=f"{method}: {error}")
         return fitter
-
 
 def _build(
     aperture: Aperture,
@@ -266,10 +261,11 @@ def _build(
     normalisation: str,
     remove: str | None,
     options: MappingOptions,
+    fit_mask: NDArray[np.bool_] | None,
 ) -> Fitter:
     started = time.perf_counter()
-    resolved_pupil = _pupil_of(aperture, pupil)
-    samples = _samples_of(aperture, resolved_pupil, user_pupil=pupil is not None)
+    resolved_pupil = pupil_of(aperture, pupil)
+    samples = samples_of(aperture, resolved_pupil, pupil is not None, fit_mask)
     timings = {"aperture": time.perf_counter() - started}
     mode_pairs = mode_list(ordering, modes)
 

@@ -5,6 +5,11 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+# Noise gain up to which a basis counts as well conditioned on an aperture: the level at which
+# single coefficients stop meaning much (0.01 wave of pixel noise becomes ~1 wave of coefficient
+# scatter at N/M ~ 1e4). Used by the ``auto`` method and by the mode counts a failure suggests.
+WELL_CONDITIONED_NOISE_GAIN = 100.0
+
 
 def normalised_gram(basis_gram: NDArray[np.float64], n_samples: int) -> NDArray[np.float64]:
     """The Gram matrix ``G = H^T H / N`` of a basis on N samples.

@@ -25,7 +25,31 @@ from numpy.typing import NDArray
 
 
 class IllConditionedBasis(ValueError):
-    """The basis is numerically rank-deficient on the samples (too many modes for the aperture)."""
+    """The basis is numerically rank-deficient on the samples (too many modes for the aperture).
+
+    Parameters
+    ----------
+    message : str
+        What failed, with the figures compared.
+    usable_modes : int, optional
+        The largest number of leading modes whose kappa(G) stays a hundredfold below the limit
+        on these samples (computed from the same factor), or None when not known.
+    advice : tuple of (str, object), optional
+        Settings that avoid the failure, as (setting, value) pairs, e.g.
+        ``(("method", "csf-qcm"), ("modes", 15))``; the message already names them, a command
+        line may reword them as its own options.
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        usable_modes: int | None = None,
+        advice: tuple[tuple[str, object], ...] = (),
+    ) -> None:
+        super().__init__(message)
+        self.usable_modes = usable_modes
+        self.advice = advice
 
 
 def _cholesky(matrix: NDArray[np.float64], what: str) -> tuple[NDArray[np.float64], bool]:

@@ -14,13 +14,72 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
+from .conditioning import WELL_CONDITIONED_NOISE_GAIN
 from .normal_equations import IllConditionedBasis
 
-# Largest condition number of the sampled basis H (kappa(G) is its square) that still gives
-# meaningful coefficients: CholeskyQR2 is accurate up to about eps**-0.5 (Fukaya et al. 2014),
-# and past it the coefficients' noise gain exceeds 1e7 anyway.
-MAX_BASIS_CONDITION = float(np.finfo(np.float64).eps) ** -0.5
+# Largest condition number of the Gram matrix G = H^T H / N that still gives meaningful
+# coefficients: CholeskyQR2 is accurate for kappa(H) up to about eps**-0.5 (Fukaya et al. 2014),
+# i.e. kappa(G) up to 1/eps = 2**52 = 4503599627370496 (exact in float64), and past it the
+# coefficients' noise gain exceeds 1e7 anyway. This one number is compared and printed.
+MAX_GRAM_CONDITION = 1.0 / float(np.finfo(np.float64).eps)
+MAX_BASIS_CONDITION = float(np.sqrt(MAX_GRAM_CONDITION))  # kappa(H), the same limit (2**26)
+# The suggested mode count keeps kappa(G) this much below the limit, so that a refit with
+# those modes (a fresh factorisation, not the leading block of this one) passes for sure.
+_ADVICE_MARGIN = 100.0
 
+
+def distinct_figures(value: float, limit: float) -> tuple[str, str]:
+    """``value`` and ``limit`` printed with the fewest significant digits (at least 3) that keep
+    them as different as they are: a value above the limit never prints as equal or below it.
+
+    Parameters
+    ----------
+    value, limit : float
+
+    Returns
+    -------
+    (str, str)
+    """
+    for digits in range(3, 18):
+        shown_value, shown_limit = f"{value:.{digits}g}", f"{limit:.{digits}g}"
+        if (float(shown_value) > float(shown_limit)) == (value > limit) and (
+            float(shown_value) < float(shown_limit)
+        ) == (value < limit):
+            return shown_value, shown_limit
+    return repr(value), repr(limit)
+
+
+def usable_mode_count(triangular: NDArray[np.float64], limit: float = MAX_GRAM_CONDITION) -> int:
+    """The largest k whose first k modes are well conditioned on the samples.
+
+    Well conditioned: noise gain at most ``WELL_CONDITIONED_NOISE_GAIN`` and kappa(G) at most
+    ``limit / 100``. With ``H = Q R`` (R upper triangular), the first k columns are
+    ``Q[:, :k] R[:k, :k]``, so their Gram matrix is ``R[:k, :k]^T R[:k, :k]``: its eigenvalues are
+    the squared singular values of the leading block.
+
+    Parameters
+    ----------
+    triangular : ndarray, shape (M, M)
+        R of the full basis.
+    limit : float
+        The kappa(G) limit; the count keeps a hundredfold margin below it.
+
+    Returns
+    -------
+    int
+        0 if not even the first mode passes.
+    """
+    usable = 0
+    for k in range(1, triangular.shape[0] + 1):
+        singular = np.linalg.svd(triangular[:k, :k], compute_uv=False)
+        if singular[-1] <= 0:
+            break
+        kappa = (singular[0] / singular[-1]) ** 2
+        gain = np.sqrt(np.mean(singular**-2.0))
+        if kappa > limit / _ADVICE_MARGIN or gain > WELL_CONDITIONED_NOISE_GAIN:
+            break
+        usable = k
+    return usable
 
 def orthonormalise(
     columns: NDArray[np.float64], what: str
@@ -65,11 +124,13 @@ def orthonormalise(
         q = q @ scipy.linalg.solve_triangular(r, np.eye(r.shape[0]), lower=False)
         r_total = r @ r_total
     singular = np.linalg.svd(r_total, compute_uv=False)
-    if singular[0] > MAX_BASIS_CONDITION * singular[-1]:
+    kappa = float((singular[0] / singular[-1]) ** 2)
+    if not kappa <= MAX_GRAM_CONDITION:
+        shown_kappa, _ = distinct_figures(kappa, MAX_GRAM_CONDITION)
         raise IllConditionedBasis(
-            f"{what}: kappa(G) = {(singular[0] / singular[-1]) ** 2:.3g} on these {n} samples; "
-            f"expected at most {MAX_BASIS_CONDITION ** 2:.1g} (use fewer modes or method 'qr' "
-            "with fewer modes)"
+            f"{what}: kappa(G) = {shown_kappa} on these {n} samples is above the limit "
+            f"{MAX_GRAM_CONDITION:.17g} (1/eps = 2**52): these modes are numerically degenerate here",
+            usable_modes=usable_mode_count(r_total),
         )
     return q, r_total
 

@@ -116,6 +116,9 @@ class FitterDiagnostics:
         Vertices of the aperture mesh (mapped methods).
     fallback : str or None
         Why a mapped method fell back to ``qr``; None when no fallback happened.
+    method_reason : str or None
+        With ``method="auto"``: why ``method`` was chosen (the figure compared and its limit);
+        None for a method asked for by name.
     """
 
     method: str
@@ -134,6 +137,7 @@ class FitterDiagnostics:
     csf_iterations: int | None = None
     mesh_vertices: int | None = None
     fallback: str | None = None
+    method_reason: str | None = None
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready form (the CLI's names)."""

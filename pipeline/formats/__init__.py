@@ -1,23 +1,40 @@
-"""File formats: maps and masks (.npy/.npz/.csv), camera images, Zygo MetroPro .dat and .datx."""
+"""File formats: maps and masks (.npy), camera images, measured maps (Zygo MetroPro .dat and .datx,
+4D Technology 4Sight .h5), and what is not supported."""
 
 from __future__ import annotations
 
 from .datx import DatxMap, read_datx
+from .errors import InputError
+from .fourd import FourDMap, read_4d
 from .images import FRAME_SUFFIXES, read_frame, read_frame_set
-from .maps import InputError, load_map, load_mask
+from .maps import load_map, load_mask
+from .measured import (
+    MEASURED_MAP_SUFFIXES,
+    SUPPORTED_FILES,
+    MeasuredMap,
+    read_measured_map,
+    unsupported_reason,
+)
 from .metropro import MetroProMap, read_metropro_dat
 from .metropro_header import MetroProHeader
 
 __all__ = [
     "DatxMap",
     "FRAME_SUFFIXES",
+    "FourDMap",
     "InputError",
+    "MEASURED_MAP_SUFFIXES",
+    "MeasuredMap",
     "MetroProHeader",
     "MetroProMap",
+    "SUPPORTED_FILES",
     "load_map",
     "load_mask",
+    "read_4d",
     "read_datx",
     "read_frame",
     "read_frame_set",
+    "read_measured_map",
     "read_metropro_dat",
+    "unsupported_reason",
 ]

@@ -21,7 +21,7 @@ import h5py
 import numpy as np
 from numpy.typing import NDArray
 
-from .maps import InputError
+from .errors import InputError
 
 __all__ = ["DatxMap", "read_datx"]
 

@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .maps import InputError
+from .errors import InputError
 
 __all__ = ["BT601_WEIGHTS_BGR", "FRAME_SUFFIXES", "read_frame", "read_frame_set"]
 

@@ -12,11 +12,12 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from .errors import InputError
+from .measured import MEASURED_MAP_SUFFIXES, read_measured_map, unsupported_reason
+
+__all__ = ["InputError", "load_map", "load_mask"]
+
 _IMAGE_SUFFIXES = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp"}
-
-
-class InputError(ValueError):
-    """A file that cannot be used: missing, unreadable, or not of the expected kind."""
 
 
 def _existing(path: str | Path) -> Path:
@@ -34,25 +35,34 @@ def _load_npy(path: Path) -> NDArray:
 
 
 def load_map(path: str | Path) -> NDArray[np.float64]:
-    """Read a wavefront or surface map from a ``.npy`` file.
+    """Read a wavefront or surface map from a ``.npy`` file or an instrument file.
 
     Parameters
     ----------
     path : str or Path
-        A ``.npy`` file holding a 2-D real array; NaN marks pixels outside the aperture.
+        A ``.npy`` file holding a 2-D real array (NaN marks pixels outside the aperture), or a
+        measured map: Zygo ``.dat`` or ``.datx``, 4D Technology 4Sight ``.h5``
+        (:func:`~wavestack.pipeline.formats.measured.read_measured_map`).
 
     Returns
     -------
     ndarray of float64, shape (rows, cols)
+        The ``.npy`` values as stored; an instrument file's map in nanometres, NaN where the
+        file marks a pixel invalid.
 
     Raises
     ------
     InputError
-        If the file is missing or unreadable, not 2-D, not real-valued, or has no finite value.
+        If the file is missing or unreadable, of an unsupported kind (said first), not 2-D,
+        not real-valued, or has no finite value.
     """
     path = _existing(path)
-    if path.suffix.lower() != ".npy":
-        raise InputError(f"{path}: expected a .npy map (2-D float array, NaN outside)")
+    suffix = path.suffix.lower()
+    if suffix in MEASURED_MAP_SUFFIXES:
+        return np.array(read_measured_map(path).map_nm)
+    if suffix != ".npy":
+        reason = unsupported_reason(path, images=False)
+        raise InputError(reason or f"{path}: expected a .npy map (2-D float array, NaN outside)")
     array = _load_npy(path)
     if array.ndim != 2 or 0 in array.shape:
         raise InputError(f"{path}: expected a 2-D map, got an array of shape {array.shape}")

@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .maps import InputError
+from .errors import InputError
 from .metropro_header import METROPRO_MAGIC, _parse_header, MetroProHeader
 
 __all__ = [

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .maps import InputError
+from .errors import InputError
 
 
 METROPRO_MAGIC = MappingProxyType({0x881B036F: 1, 0x881B0370: 2, 0x881B0371: 3})  # magic -> format

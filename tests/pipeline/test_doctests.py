@@ -22,6 +22,8 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
     "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice
     "wavestack.pipeline.shack_hartmann.lattice_detection",  # detect_lattice
+    "wavestack.pipeline.formats.fourd",  # read_4d
+    "wavestack.pipeline.formats.measured",  # read_measured_map
 )
 
 

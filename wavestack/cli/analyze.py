@@ -1,7 +1,8 @@
 """``wavestack analyze``: interferograms or instrument files to Zernike terms.
 
 Several image files are a phase-shifted set in stepping order; one image is analysed by the
-carrier method; a ``.dat`` (Zygo MetroPro) or ``.datx`` file is a measured map.
+carrier method; a ``.dat`` (Zygo MetroPro), ``.datx`` or 4D ``.h5`` file is a measured map, fitted on
+exactly the pixels it marks valid (:mod:`wavestack.cli.measured_map`).
 """
 
 from __future__ import annotations
@@ -19,15 +20,14 @@ from wavestack.cli.analyze_aperture import format_aperture, refuse_for_measured_
 from wavestack.cli.analyze_sh import add_shack_hartmann_arguments, requested as shack_hartmann, run_shack_hartmann
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
-from wavestack.pipeline import Aperture, InputError, build_fitter
-from wavestack.pipeline import DetectionSettings, detect_aperture
+from wavestack.cli.measured_map import ANALYZE_FLAGS, MapPixels, add_fit_method_argument, advised, fit_mask_of
+from wavestack.cli.measured_map import map_lines, map_report, read_map_wavefront, reject_unsupported
+from wavestack.pipeline import Aperture, IllConditionedBasis, InputError, available_methods, build_fitter
 from wavestack.pipeline import ConicTest, implied_conic_constant, null_wavefront_waves
 from wavestack.pipeline import read_frame, read_frame_set
 from wavestack.pipeline import MeasuredWavefront, wavefront_from_carrier, wavefront_from_phase_shifts
-from wavestack.pipeline import read_datx, read_metropro_dat
+from wavestack.pipeline.formats import MEASURED_MAP_SUFFIXES
 from wavestack.pipeline import mode_name
-
-_MAP_SUFFIXES = {".dat", ".datx"}
 
 
 def _steps_argument(text: str) -> np.ndarray:
@@ -40,7 +40,7 @@ def _steps_argument(text: str) -> np.ndarray:
 
 def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``wavestack analyze``."""
-    parser.add_argument("files", nargs="+", metavar="FILE", help="images (a phase-shifted set or one carrier frame), or one .dat/.datx")
+    parser.add_argument("files", nargs="+", metavar="FILE", help="images (a phase-shifted set or one carrier frame), or one .dat/.datx/4D .h5")
     parser.add_argument("--method", choices=("psi", "aia", "pca", "carrier"),
                         help="psi: least squares with known steps; aia/pca: steps estimated from the data "
                              "(default: psi for several frames, carrier for one)")
@@ -51,7 +51,7 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wavelength-nm", type=float, help="test wavelength (required for images; files carry it)")
     parser.add_argument("--modes", type=positive_int, default=36)
     parser.add_argument("--ordering", choices=("noll", "ansi", "fringe"), default="noll")
-    parser.add_argument("--fit-method", choices=("circle", "qr", "csf-qcm"), default="circle")
+    add_fit_method_argument(parser, "--fit-method", [m for m in available_methods() if m != "conformal"])
     parser.add_argument("--remove", choices=("ptt", "pttp"), help="remove piston/tilt(/power) before reporting")
     parser.add_argument("--null-conic", type=float, metavar="K",
                         help="subtract the wavefront a conic of constant K shows at its centre of curvature "
@@ -64,14 +64,15 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     add_shack_hartmann_arguments(parser)
 
 
-def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float]:
+def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float, MapPixels | None]:
     paths = [Path(p) for p in args.files]
+    reject_unsupported(paths)
     suffixes = {p.suffix.lower() for p in paths}
-    if suffixes & _MAP_SUFFIXES:
+    if suffixes & set(MEASURED_MAP_SUFFIXES):
         if len(paths) != 1:
-            raise InputError(f"{paths[0]}: a measured map (.dat/.datx) is analysed on its own; got {len(paths)} files")
+            raise InputError(f"{paths[0]}: a measured map (.dat/.datx/.h5) is analysed on its own; got {len(paths)} files")
         refuse_for_measured_map(args, paths[0])
-        return _measured_map(paths[0], args)
+        return read_map_wavefront(paths[0], args.wavelength_nm)
     if args.wavelength_nm is None:
         raise InputError(f"{paths[0]}: --wavelength-nm is required for interferogram images")
     if len(paths) == 1:
@@ -79,7 +80,7 @@ def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float]:
             raise InputError(f"{paths[0]}: one frame can only be analysed by the carrier method; got --method {args.method}")
         frame = read_frame(paths[0])
         choice = aperture_choice(args, frame.shape[:2])
-        return wavefront_from_carrier(frame, sign=args.carrier_sign, aperture=choice), args.wavelength_nm
+        return wavefront_from_carrier(frame, sign=args.carrier_sign, aperture=choice), args.wavelength_nm, None
     if args.method == "carrier":
         raise InputError(f"{paths[0]}: the carrier method takes one frame; got {len(paths)}")
     frames = read_frame_set(paths)
@@ -88,25 +89,7 @@ def _measure(args: argparse.Namespace) -> tuple[MeasuredWavefront, float]:
     method = {"psi": "lsq", None: "lsq", "aia": "aia", "pca": "pca"}[args.method]
     measured = wavefront_from_phase_shifts(frames, method=method, steps_rad=args.steps, direction=args.direction,
                                            aperture=aperture_choice(args, frames.shape[1:3]))
-    return measured, args.wavelength_nm
-
-
-def _measured_map(path: Path, args: argparse.Namespace) -> tuple[MeasuredWavefront, float]:
-    tick = time.perf_counter()
-    if path.suffix.lower() == ".dat":
-        data = read_metropro_dat(path)
-        map_nm, wavelength = data.phase_nm, data.header.wavelength_nm
-    else:
-        data = read_datx(path)
-        map_nm, wavelength = data.surface_nm, data.wavelength_nm
-    wavelength = args.wavelength_nm or wavelength
-    valid = np.isfinite(map_nm)
-    # dropouts inside the measured area are filled for the aperture and omitted in the fit
-    aperture = detect_aperture(valid.astype(np.float64), DetectionSettings(threshold=0.5)).aperture
-    return MeasuredWavefront(
-        waves=map_nm / wavelength, aperture=aperture, method="file", aperture_choice="file",
-        timings={"read": time.perf_counter() - tick},
-    ), wavelength
+    return measured, args.wavelength_nm, None
 
 
 def _null_test(args: argparse.Namespace, wavelength_nm: float) -> ConicTest | None:
@@ -139,7 +122,7 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if shack_hartmann(args):
         return run_shack_hartmann(args)
     try:
-        measured, wavelength_nm = _measure(args)
+        measured, wavelength_nm, pixels = _measure(args)
     except InputError:
         raise
     except ValueError as error:  # the data, not the file, is unusable: say which input
@@ -159,10 +142,13 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     tick = time.perf_counter()
     if test is not None:
         waves = _apply_null_test(args, test, aperture, waves, report)
-    fitter = build_fitter(
-        aperture, method=args.fit_method, modes=args.modes, ordering=args.ordering,
-        dtype=np.float64, remove=args.remove, fallback="qr",
-    )
+    try:
+        fitter = build_fitter(
+            aperture, method=args.fit_method, modes=args.modes, ordering=args.ordering,
+            dtype=np.float64, remove=args.remove, fallback="qr", fit_mask=fit_mask_of(measured),
+        )
+    except IllConditionedBasis as error:
+        raise advised(error, args.files[0], ANALYZE_FLAGS) from None
     result = fitter.fit(waves, nan_policy="omit", residual=True)
     timings["fit"] = time.perf_counter() - tick
     analysed = result.residual_map + fitter.surface(result.coefficients)  # the map less removed terms
@@ -172,7 +158,8 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     report.update({
         "wavelength_nm": wavelength_nm,
         "aperture": aperture_report(measured),
-        "fit_method": fitter.basis.method, "modes": len(fitter.basis.modes), "ordering": fitter.basis.ordering,
+        "fit_method": fitter.basis.method, "fit_method_reason": fitter.diagnostics.method_reason,
+        "modes": len(fitter.basis.modes), "ordering": fitter.basis.ordering,
         "first_index": fitter.basis.first_index, "normalisation": fitter.basis.normalisation,
         "mode_indices": [list(m) for m in fitter.basis.modes],
         "coefficients_waves": result.coefficients.tolist(),
@@ -183,6 +170,7 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     })
     if result.removed is not None:
         report["removed"] = result.removed.as_dict()
+    map_report(report, pixels, result.valid_count)
     print(json.dumps(report) if args.json else _format(report))
     return 0
 
@@ -198,6 +186,7 @@ def _format(report: dict[str, Any]) -> str:
         f"wavefront   RMS {report['rms_waves']:.4f} waves ({report['rms_nm']:.1f} nm), "
         f"PV {report['pv_waves']:.4f} waves ({report['pv_nm']:.1f} nm) at {report['wavelength_nm']} nm",
     ]
+    lines += map_lines(report)
     if "implied_conic" in report:
         lines.append(f"conic       measured Z11 {report['measured_spherical_waves']:.4f} waves implies K = {report['implied_conic']:.3f}"
                      + (f"; null for K = {report['null_conic']} subtracted" if "null_conic" in report else ""))

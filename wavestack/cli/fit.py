@@ -12,10 +12,12 @@ import numpy as np
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.example import synthetic_example
+from wavestack.cli.measured_map import FIT_FLAGS, add_fit_method_argument, advised
 from wavestack.pipeline import (
     Aperture,
     FitResult,
     Fitter,
+    IllConditionedBasis,
     InputError,
     Pupil,
     available_methods,
@@ -45,12 +47,13 @@ def _pupil_argument(text: str) -> Pupil:
 def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``wavestack fit``."""
     source = parser.add_mutually_exclusive_group(required=True)
-    source.add_argument("wavefront", nargs="?", help="2-D .npy map, NaN outside the aperture")
+    source.add_argument("wavefront", nargs="?",
+                        help="2-D .npy map (NaN outside the aperture), or a .dat/.datx/4D .h5 map (nm)")
     source.add_argument(
         "--example", action="store_true", help="fit the bundled synthetic example instead"
     )
     parser.add_argument("--mask", help="mask (.npy or image, non-zero = valid); default: finite pixels")
-    parser.add_argument("--method", choices=available_methods(), default="circle")
+    add_fit_method_argument(parser, "--method", available_methods())
     parser.add_argument("--modes", type=positive_int, default=36, help="number of modes (36)")
     parser.add_argument("--ordering", choices=("noll", "ansi", "fringe"), default="noll")
     parser.add_argument(
@@ -93,18 +96,21 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     if args.example and args.mask:
         parser.error("--mask cannot be combined with --example")
     wavefront, mask, source, truth = _load_inputs(args)
-    fitter = build_fitter(
-        Aperture.from_mask(mask),
-        method=args.method,
-        modes=args.modes,
-        ordering=args.ordering,
-        pupil=args.pupil,
-        dtype=_DTYPES[args.dtype],
-        remove=args.remove,
-        laplacian=args.laplacian,
-        mesh_vertices=args.mesh_vertices,
-        angular_balance=not args.no_angular_balance,
-    )
+    try:
+        fitter = build_fitter(
+            Aperture.from_mask(mask),
+            method=args.method,
+            modes=args.modes,
+            ordering=args.ordering,
+            pupil=args.pupil,
+            dtype=_DTYPES[args.dtype],
+            remove=args.remove,
+            laplacian=args.laplacian,
+            mesh_vertices=args.mesh_vertices,
+            angular_balance=not args.no_angular_balance,
+        )
+    except IllConditionedBasis as error:
+        raise advised(error, source, FIT_FLAGS) from None
     started = time.perf_counter()
     result = fitter.fit(wavefront, residual=True)
     fit_seconds = time.perf_counter() - started
@@ -138,6 +144,7 @@ def fit_report(
     report: dict[str, Any] = {
         "source": source,
         "method": basis.method,
+        "method_reason": fitter.diagnostics.method_reason,
         "modes": len(basis.modes),
         "ordering": basis.ordering,
         "first_index": basis.first_index,
@@ -173,6 +180,7 @@ def format_report(report: dict[str, Any]) -> str:
         f"fit         {report['method']}, {report['modes']} {report['ordering']} modes, "
         f"{report['normalisation']} normalisation, {report['dtype']}; "
         f"kappa(G) {diagnostics['gram_condition']:.4g}, noise gain {diagnostics['noise_gain']:.3g}",
+        *([f"method      {report['method']}: {report['method_reason']}"] if report.get("method_reason") else []),
         f"timing      build {report['timings']['total'] * 1e3:.1f} ms, "
         f"fit {report['timings']['fit'] * 1e3:.2f} ms",
         f"residual    RMS {report['residual_rms']:.4g}, PV {report['residual_pv']:.4g} (map units)",
@@ -202,7 +210,7 @@ def format_report(report: dict[str, Any]) -> str:
 
 COMMAND = Command(
     "fit",
-    help="fit Zernike terms to a wavefront map (.npy)",
-    description="Fit Zernike terms to a 2-D wavefront map (.npy, NaN outside the aperture).",
+    help="fit Zernike terms to a wavefront map (.npy, .dat, .datx, 4D .h5)",
+    description="Fit Zernike terms to a 2-D wavefront map (.npy, NaN outside the aperture) or a measured map.",
     add_arguments=add_fit_arguments, handler=run_fit,
 )

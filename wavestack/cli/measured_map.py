@@ -1,0 +1,155 @@
+"""Measured maps on the command line: the file's own pixels, counted, and fit errors with advice.
+
+A measured map (Zygo ``.dat``/``.datx``, 4D ``.h5``) says which pixels hold a measurement. The
+fit uses exactly those pixels: nothing is filled, nothing is cut. An outline is still derived
+(the detected aperture of the valid pixels, with its drop-outs filled, joined with every valid
+pixel) for the pupil circle and for a mapped method's map, and the pixels inside that outline
+without a measurement are reported as drop-outs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from wavestack.pipeline import Aperture, DetectionSettings, IllConditionedBasis, InputError
+from wavestack.pipeline import MeasuredWavefront, detect_aperture, read_measured_map, unsupported_reason
+
+# How a fitting library's setting is spelled on each command line.
+ANALYZE_FLAGS = {"method": "--fit-method", "modes": "--modes"}
+FIT_FLAGS = {"method": "--method", "modes": "--modes"}
+
+
+@dataclass(frozen=True)
+class MapPixels:
+    """Pixel counts of a measured map.
+
+    Attributes
+    ----------
+    measured : int
+        Pixels the file holds a measurement for.
+    dropouts : int
+        Pixels inside the aperture outline without a measurement (not fitted).
+    outside_outline : int
+        Measured pixels the outline detection alone would have cut (isolated pixels, rim
+        spurs); they are fitted and inside the reported aperture.
+    """
+
+    measured: int
+    dropouts: int
+    outside_outline: int
+
+    def as_dict(self, fitted: int) -> dict[str, int]:
+        """JSON form, with the count of pixels that entered the fit."""
+        return {"measured": self.measured, "fitted": int(fitted), "dropouts_inside_aperture": self.dropouts,
+                "outside_detected_outline": self.outside_outline}
+
+
+def reject_unsupported(paths: Sequence[Path]) -> None:
+    """Raise the "not supported" message for the first file wavestack cannot read.
+
+    Raises
+    ------
+    InputError
+        Naming the file, its kind and the kinds that are supported.
+    """
+    for path in paths:
+        reason = unsupported_reason(path)
+        if reason is not None:
+            raise InputError(reason)
+
+
+def read_map_wavefront(path: Path, wavelength_nm: float | None) -> tuple[MeasuredWavefront, float, MapPixels]:
+    """A measured map as waves on its outline aperture, NaN wherever the file has no measurement.
+
+    Parameters
+    ----------
+    path : Path
+        A ``.dat``, ``.datx`` or 4D ``.h5`` file.
+    wavelength_nm : float, optional
+        Overrides the file's wavelength.
+
+    Returns
+    -------
+    (MeasuredWavefront, float, MapPixels)
+        The wavefront (method ``"file"``), the wavelength used in nanometres, the pixel counts.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read or gives no wavelength and none is given.
+    """
+    tick = time.perf_counter()
+    data = read_measured_map(path)
+    wavelength = wavelength_nm or data.wavelength_nm
+    if wavelength is None:
+        raise InputError(f"{path}: the file gives no wavelength; expected --wavelength-nm")
+    valid = np.asarray(data.valid)
+    # the outline: the detected aperture (drop-outs filled) joined with every measured pixel
+    detected = detect_aperture(valid.astype(np.float64), DetectionSettings(threshold=0.5)).aperture.mask
+    outline = detected | valid
+    pixels = MapPixels(
+        measured=int(valid.sum()),
+        dropouts=int(np.count_nonzero(outline & ~valid)),
+        outside_outline=int(np.count_nonzero(valid & ~detected)),
+    )
+    waves = np.where(valid, data.map_nm / wavelength, np.nan)
+    measured = MeasuredWavefront(waves=waves, aperture=Aperture.from_mask(outline), method="file", aperture_choice="file",
+                                 timings={"read": time.perf_counter() - tick})
+    return measured, wavelength, pixels
+
+
+def fit_mask_of(measured: MeasuredWavefront) -> np.ndarray | None:
+    """The pixels to fit: a measured map's valid pixels; None (the aperture's) otherwise."""
+    if measured.method != "file":
+        return None
+    return np.isfinite(measured.waves) & measured.aperture.mask
+
+
+def advised(error: IllConditionedBasis, source: str, flags: dict[str, str]) -> InputError:
+    """The fit failure as a one-line input error whose advice names this command's options.
+
+    Parameters
+    ----------
+    error : IllConditionedBasis
+        Its ``advice`` holds only remedies the library checked to work on this aperture.
+    source : str
+        The input, named first.
+    flags : dict
+        Library setting -> option of this command (``ANALYZE_FLAGS`` or ``FIT_FLAGS``).
+    """
+    options = [f"{flags[name]} {value}" for name, value in error.advice if name in flags]
+    suffix = f" (on this command line: {' or '.join(options)})" if options else ""
+    return InputError(f"{source}: {error}{suffix}")
+
+
+def map_report(report: dict[str, Any], pixels: MapPixels | None, fitted: int) -> None:
+    """Add the pixel counts of a measured map to an ``analyze`` report (in place)."""
+    if pixels is None:
+        return
+    report["pixels"] = pixels.as_dict(fitted)
+    report["aperture"]["valid_pixels"] = pixels.measured  # measured, never filled
+
+
+def map_lines(report: dict[str, Any]) -> list[str]:
+    """The text lines of the pixel counts and the fit method's choice."""
+    lines = []
+    if "pixels" in report:
+        p = report["pixels"]
+        lines.append(f"pixels      {p['measured']} measured, {p['fitted']} fitted, "
+                     f"{p['dropouts_inside_aperture']} drop-outs inside the aperture (not fitted)")
+    if report.get("fit_method_reason"):
+        lines.append(f"fit method  {report['fit_method']}: {report['fit_method_reason']}")
+    return lines
+
+
+def add_fit_method_argument(parser: argparse.ArgumentParser, flag: str, methods: Sequence[str]) -> None:
+    """The fit-method option, ``auto`` by default."""
+    parser.add_argument(flag, choices=tuple(methods), default="auto",
+                        help="auto (default): circle where the circle basis is well conditioned on the "
+                             "aperture, else csf-qcm; says which and why")
