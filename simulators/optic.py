@@ -34,13 +34,13 @@ another size, is put in front of the camera), so the truth stays ``zernike_waves
 
 Intensity model
 ---------------
-Inside the aperture (sign convention of :mod:`wavestack.pipeline.psi`, ``delta`` the phase
+Inside the aperture (sign convention of :mod:`wavestack.pipeline.phase.psi`, ``delta`` the phase
 shift)::
 
     I = background + modulation * cos(2 pi W + carrier + delta + vibration)
 
 with ``carrier = 2 pi (nx * col / width - ny * row / height)`` for ``carrier_cycles = (nx, ny)``
-(x right, y up: the ``2 pi (fx x + fy y)`` of :mod:`wavestack.pipeline.carrier` with
+(x right, y up: the ``2 pi (fx x + fy y)`` of :mod:`wavestack.pipeline.phase.carrier` with
 ``fx = nx / width``, ``fy = ny / height``; with ``nx > 0`` ``carrier_phase(sign=+1)`` returns
 ``+2 pi W``). Outside the aperture there are no fringes, only a dim uniform halo
 (``I = halo``). All levels are fractions of full scale ``2**bit_depth - 1``; Gaussian read

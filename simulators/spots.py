@@ -4,8 +4,8 @@ A :class:`SpotRenderer` images the wavefront of a :class:`~wavestack.simulators.
 through a square lenslet array onto a camera and returns each frame with its ground truth
 (:class:`SpotTruth`).
 
-Conventions (those of :mod:`wavestack.pipeline.shack_hartmann` and
-:mod:`wavestack.pipeline.slope_reconstruction`)
+Conventions (those of :mod:`wavestack.pipeline.shack_hartmann`: centroids, slopes and
+reconstruction)
 ----------------------------------------------------------------------------------------------
 * Pixel ``(row, col)`` has its centre at ``(col, row)``; positions are ``(col, row)`` pairs;
   physical coordinates are ``x = col``, ``y = -row`` (x right, y up).
