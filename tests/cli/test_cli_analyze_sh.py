@@ -187,3 +187,10 @@ def test_a_pitch_that_does_not_match_the_spots(capsys, sensor) -> None:
     folder, *_ = sensor
     one_line_error(capsys, [str(folder / "spots.png"), "--lenslet-pitch-um", str(2 * PITCH_PX * PIXEL_UM), *COMMON],
                    "spots.png", "px apart")
+
+
+@pytest.mark.parametrize("option", [["--aperture", "circle"], ["--mask", "mask.png"]])
+def test_interferogram_aperture_options_are_refused(capsys, sensor, option) -> None:
+    folder, *_ = sensor
+    one_line_error(capsys, [str(folder / "spots.png"), "--reference", str(folder / "reference.png"), *COMMON, *option],
+                   "spots.png", "--aperture and --mask apply to interferograms")

@@ -120,6 +120,9 @@ def _apply_null_test(args: argparse.Namespace, test: ConicTest, aperture: Apertu
 def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack analyze``; returns the exit status."""
     if shack_hartmann(args):
+        if args.mask is not None or args.aperture != "detected":
+            raise InputError(f"{args.files[0]}: --aperture and --mask apply to interferograms, not to a "
+                             "Shack-Hartmann spot image (its pupil is --pupil-px)")
         return run_shack_hartmann(args)
     try:
         measured, wavelength_nm, pixels = _measure(args)
