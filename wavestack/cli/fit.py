@@ -26,11 +26,13 @@ from wavestack.pipeline import (
     load_mask,
 )
 from wavestack.pipeline import mode_name
+from wavestack.pipeline.fit import AUTO_MAX_NOISE_GAIN
 
 _DTYPES = {"float64": np.float64, "float32": np.float32}
 # Above this coefficient noise amplification the human report warns that single coefficients
-# mean little (100: 0.01 waves of pixel noise become ~1 wave of coefficient scatter at N/M ~ 1e4).
-_NOISE_GAIN_WARNING = 100.0
+# mean little (100: 0.01 waves of pixel noise become ~1 wave of coefficient scatter at N/M ~ 1e4);
+# the same level at which the `auto` method leaves the circle basis for a mapped one.
+_NOISE_GAIN_WARNING = AUTO_MAX_NOISE_GAIN
 
 
 def _pupil_argument(text: str) -> Pupil:
