@@ -6,8 +6,8 @@ One place strings the signal path together, for a phase-shifted set or a single 
    (:mod:`wavestack.pipeline.phase.carrier`), with the modulation map alongside;
 2. aperture: detected from the modulation (:mod:`wavestack.pipeline.aperture.detect`), so the
    mirror is found inside its speckled halo, its edge half way between the disk's and the halo's
-   modulation; for a carrier frame from the local fringe contrast (see
-   :func:`local_fringe_contrast`). Or, by ``aperture=``, the circle fitted to that edge (for a
+   modulation; for a carrier frame from the local fringe energy (see
+   :func:`_fringe_energy`). Or, by ``aperture=``, the circle fitted to that edge (for a
    round optic) or the user's mask (:func:`~wavestack.pipeline.aperture.choice.choose_aperture`);
 3. unwrapping on that aperture (:mod:`wavestack.pipeline.phase.spatial_unwrap`);
 4. units: waves (``phase / 2 pi``), and nanometres with the wavelength.
@@ -107,6 +107,49 @@ def local_fringe_contrast(frame: NDArray, period_px: float) -> NDArray[np.float3
     return np.sqrt(square, out=square)
 
 
+def _fringe_energy(frame: NDArray, period_px: float) -> NDArray[np.float32]:
+    """Local fringe energy: the squared deviation from the background, smoothed over a quarter period.
+
+    ``E = G_(P/4) * (I - B)**2`` with ``B`` the frame's mean over a box of about two periods
+    ``P`` (:func:`local_fringe_contrast`'s box). For fringes ``B + b cos(phi)``, ``(I - B)**2``
+    is ``b**2 / 2 (1 + cos(2 phi))``; a Gaussian of ``sigma = P / 4`` passes
+    ``exp(-pi**2 / 2)``, 0.7 %, of the ``cos(2 phi)`` ripple, so ``E`` is ``b**2 / 2`` inside
+    the disk and the halo's speckle energy outside, with an edge response only ~2 sigma wide
+    either side of the edge and symmetric about it: the half-way level is the edge.
+
+    Why not the box variance (the square of :func:`local_fringe_contrast`), as before: its edge
+    response is the whole box (two periods, 55 px on the bundled carrier frame), (i) so within
+    half a box of the frame's border the box is cut or mirrored and reaches the disk from a halo
+    strip thinner than that (14 px at the top and bottom of the bundled frame, which joined the
+    aperture, enclosing radius 302.5 px), and (ii) a box straddling the edge adds the variance of
+    the background step, ``f (1 - f) (A_in - A_out)**2`` (the disk is ~40 counts brighter than
+    the halo there: up to ~400 against a half-way level of ~1100), which moves the half-way
+    crossing outwards (the fitted circle came out 2.3 % wider than the cycles'). Here the
+    background step leaves ``((1 - f) dA)**2`` at a pixel a fraction ``f`` of whose box is on its
+    own side, the same at equal distances either side of the edge, which keeps the crossing
+    there to first order. A choice made here, not a source's: the Gaussian width trades
+    ripple (wider is smoother) against the edge response (narrower is sharper).
+
+    Parameters
+    ----------
+    frame : ndarray, shape (rows, cols)
+        Carrier interferogram, counts.
+    period_px : float
+        The carrier's fringe period, pixels (sets the box and the Gaussian).
+
+    Returns
+    -------
+    ndarray of float32, shape (rows, cols)
+        Fringe energy ``E``, counts squared.
+    """
+    values = np.asarray(frame, dtype=np.float32)
+    size = _contrast_box(period_px)
+    background = cv2.boxFilter(values, cv2.CV_32F, (size, size), borderType=cv2.BORDER_REFLECT)
+    cv2.subtract(values, background, dst=background)
+    cv2.multiply(background, background, dst=background)
+    return cv2.GaussianBlur(background, (0, 0), period_px / 4.0, borderType=cv2.BORDER_REFLECT)
+
+
 def _contrast_box(period_px: float) -> int:
     """Side of the local-contrast box, pixels: about two periods, odd, at least 3."""
     return max(3, int(round(2 * period_px)) | 1)
@@ -195,16 +238,8 @@ def wavefront_from_carrier(
         -1 flips the result to match a setup whose tilt runs the other way.
     detection : DetectionSettings
     aperture : {"detected", "circle"} or array_like of bool, shape (rows, cols)
-        As for :func:`wavefront_from_phase_shifts`, detected in the local fringe *variance*
-        (the square of :func:`local_fringe_contrast`). Why the variance: over a box straddling
-        a straight edge the variance is, to first order, the fringe-bearing fraction ``f`` of
-        the box times the disk's variance plus ``1 - f`` times the halo's (the cross term
-        ``f (1 - f) (A_in - A_out)^2`` is small where the mean intensities inside and outside
-        are close, as on the bundled frame: 114 against 108 counts, against a fringe variance
-        of ~2000), and ``f = 1/2`` at the edge for any box symmetric about it. So the half-way
-        level of the variance is at the edge whatever the box size, where the standard
-        deviation (``sqrt(f)``) reaches half way a quarter box outside it, which is why the
-        contrast-detected aperture used to be eroded by half a box.
+        As for :func:`wavefront_from_phase_shifts`, detected in the local fringe energy
+        (see ``_fringe_energy``), whose half-way level is at the mirror's edge.
 
     Returns
     -------
@@ -220,13 +255,13 @@ def wavefront_from_carrier(
     result = carrier_phase(np.asarray(frame), sign=sign)
     timings["phase"] = time.perf_counter() - tick
     period = 1.0 / float(np.hypot(*result.carrier))
-    variance = np.square(local_fringe_contrast(frame, period))
-    # the box's edge response is as wide as the box: the levels are taken beyond half of it
+    energy = _fringe_energy(frame, period)
+    # the background box's step residue reaches half a box out: the levels are taken beyond it
     margin = max(detection.edge_margin_px, _contrast_box(period) // 2 + 3)
     detection = dataclasses.replace(detection, edge_margin_px=margin)
     return MeasuredWavefront(
         method="carrier",
         modulation=result.modulation,
         carrier=tuple(result.carrier),
-        **_finish(result.phase, variance, aperture, detection, timings),
+        **_finish(result.phase, energy, aperture, detection, timings),
     )

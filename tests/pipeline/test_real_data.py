@@ -8,6 +8,7 @@ independent measurements; a tilted 6-frame set (Image2282-2287) and one carrier 
 
 from __future__ import annotations
 
+import math
 
 import numpy as np
 import pytest
@@ -30,6 +31,54 @@ pytestmark = require_shared_data()
 def _coefficients(measured) -> np.ndarray:
     fitter = build_fitter(measured.aperture, modes=MODES, dtype=np.float64)
     return fitter.fit(measured.waves, nan_policy="omit").coefficients
+
+
+def _kasa(points: np.ndarray) -> tuple[float, float, float]:
+    x, y = points[:, 0], points[:, 1]
+    (d, e, f), *_ = np.linalg.lstsq(np.column_stack((x, y, np.ones_like(x))), -(x * x + y * y), rcond=None)
+    return -d / 2, -e / 2, math.sqrt(d * d / 4 + e * e / 4 - f)
+
+
+def amplitude_edge_circle(frame: np.ndarray, start: tuple[float, float, float], sectors: int = 24):
+    """(col, row, radius, residual RMS) of the carrier frame's fringe-amplitude edge, from sectors.
+
+    Nothing of the detector: the local fringe amplitude at radius r in a sector is the standard
+    deviation of the frame's pixels in that sector's 1 px ring (an arc of ~75 px at the rim, ~3
+    fringes: there is no background step inside a 1 px ring, and no box to spread the edge);
+    per sector its disk level (median 10-40 px inside the current radius) and halo level (10-40
+    px outside), the first fall below half way (linear interpolation), then a Kasa circle after
+    dropping sectors more than 3 scaled MADs off; three rounds, each about the last circle.
+    ``start`` is only the first round's centre and radius.
+    """
+    rows, cols = np.indices(frame.shape)
+    cx, cy, r0 = start
+    for _ in range(3):
+        sector = np.floor((np.arctan2(rows - cy, cols - cx) + np.pi) / (2 * np.pi) * sectors).astype(int) % sectors
+        key = (sector * 1000 + np.floor(np.hypot(cols - cx, rows - cy)).astype(int)).ravel()
+        n, s1, s2 = (np.bincount(key, w, minlength=sectors * 1000).reshape(sectors, 1000)
+                     for w in (None, frame.ravel(), (frame * frame).ravel()))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            amp = np.where(n >= 20, np.sqrt(np.maximum(s2 / n - (s1 / n) ** 2, 0.0)), np.nan)
+        points, lo = [], int(r0)
+        for k in range(sectors):
+            prof = amp[k]
+            if np.all(np.isnan(prof[lo - 40:lo - 10])) or np.all(np.isnan(prof[lo + 10:lo + 40])):
+                continue  # the halo (or the disk) is outside the frame in this sector
+            level = 0.5 * (np.nanmedian(prof[lo - 40:lo - 10]) + np.nanmedian(prof[lo + 10:lo + 40]))
+            fall = [q for q in range(lo - 20, lo + 40) if prof[q] >= level > prof[q + 1]]
+            if fall:
+                q = fall[0]
+                dist = q + 0.5 + (prof[q] - level) / (prof[q] - prof[q + 1])
+                angle = (k + 0.5) / sectors * 2 * np.pi - np.pi
+                points.append((cx + dist * np.cos(angle), cy + dist * np.sin(angle)))
+        pts = np.array(points)
+        circle = _kasa(pts)
+        for _ in range(5):
+            res = np.hypot(pts[:, 0] - circle[0], pts[:, 1] - circle[1]) - circle[2]
+            keep = np.abs(res - np.median(res)) <= 3 * 1.4826 * np.median(np.abs(res - np.median(res)))
+            circle = _kasa(pts[keep])
+        cx, cy, r0 = circle
+    return cx, cy, r0, float(np.std(res[keep])), int(keep.sum())
 
 
 @pytest.fixture(scope="module")
@@ -87,15 +136,17 @@ def test_carrier_frame_measures_the_spherical_on_the_same_pupil_as_the_cycles(cy
     measured = wavefront_from_carrier(frame, sign=-1)
     assert measured.aperture.valid_count > 200_000  # the whole mirror, found from fringe variance
     # Compare like with like: Z11 scales with the pupil radius to the fourth power, and the
-    # carrier aperture's enclosing circle (301.1 px: halo at the frame's top and bottom edges
-    # passes the variance threshold) is not the cycles' (285.5 px). One fitter on the pixels all
-    # three share.
+    # carrier aperture (from the fringe energy; its enclosing circle 295.0 px from a bump where
+    # the rim meets the frame's bottom, and bites where the fringes fade at the left rim) is not
+    # the cycles' (285.5 px). One fitter on the pixels all three share.
     common = measured.aperture.mask & cycles[0].aperture.mask & cycles[1].aperture.mask
     fitter = build_fitter(Aperture.from_mask(common), modes=MODES, dtype=np.float64)
     spherical = fitter.fit(measured.waves, nan_policy="omit").coefficients[10]
     reference = np.mean([fitter.fit(m.waves, nan_policy="omit").coefficients[10] for m in cycles])
-    # Measured 0.431 against 0.449 (4 % low; 0.432 against 0.461, 6 % low, on the common
-    # region before the half-way edge, when the carrier aperture was an eroded contrast mask). Why: the mirror's own defocus and spherical move
+    # Measured 0.419 against 0.450 (7 % low; 0.431 against 0.449, 4 % low, on the common region
+    # when the carrier aperture came from the box variance and took in halo rather than losing
+    # the faded bites at the left rim; 0.432 against 0.461 with the eroded contrast mask before
+    # the half-way edge). Why low: the mirror's own defocus and spherical move
     # the local fringe frequency far from the 27 px carrier, and the sideband crop (at most half
     # the carrier frequency towards DC, where the background sits) still attenuates the
     # steepest, outer-zone phase. The bound allows that known bias (< 10 %) and nothing more.
@@ -128,23 +179,65 @@ def test_the_circle_choice_gives_the_three_sets_one_pupil_and_one_spherical(circ
     assert all(s == pytest.approx(reference, rel=0.02) for s in spherical)
 
 
-def test_the_carrier_frame_finds_the_same_mirror(circles) -> None:
-    """The carrier frame's edge (in the local fringe variance) against the cycles' edge circle.
+@pytest.fixture(scope="module")
+def carrier_edge():
+    """The carrier frame and its amplitude edge (col, row, radius, residual RMS, sectors kept)."""
+    frame = read_frame(PSI / "Image197.jpg")
+    rows, cols = frame.shape
+    return frame, amplitude_edge_circle(frame.astype(np.float64), (cols / 2, rows / 2, 0.45 * rows))
 
-    Same mirror, camera and magnification. Centre: within 3 combined stated uncertainties (the
-    carrier's ~1 px: its variance edge is rough, RMS 3.5 px about the circle). Radius: within
-    3 %, a loose bound on purpose: the variance is half way at the edge only where the box holds
-    whole fringes and the halo's mean intensity equals the disk's; here the halo ring around the
-    rim is bright and the defocus leaves about one broad fringe per box at the left and right
-    rims, and the circle comes out 6.6 px (2.3 %) wider than the cycles' (measured 291.1 against
-    284.5 px). The carrier frame's pupil is therefore the weakest of the four; see results.md.
+
+def test_the_carrier_frame_finds_the_mirror_edge_of_its_fringe_amplitude(carrier_edge) -> None:
+    """The carrier frame's edge circle against the amplitude edge computed here from the frame.
+
+    Tolerances: 3 combined standard uncertainties (the circle's stated ones; the estimate's
+    from its residual RMS over its sectors, ``rms / sqrt(n)`` in radius, ``rms sqrt(2 / n)`` in
+    centre) plus 0.5 px for what the two definitions may differ by (a half-way level of the
+    smoothed fringe energy against one of the ring amplitude, across an edge blurred by the
+    camera by ~1-2 px). Measured: 284.6 +- 0.4 px around (391.7, 299.1) against 284.4 px around
+    (392.1, 298.5) (RMS 0.56 px over 21 sectors). Before the fringe energy, from the box
+    variance: 291.1 +- 0.7 px, 6.7 px wide, from the background step and the halo's speckle
+    that a 55 px box spreads across the edge.
+    """
+    frame, (ex, ey, er, rms, n) = carrier_edge
+    edge = wavefront_from_carrier(frame, sign=-1, aperture="circle").edge
+    assert edge is not None
+    tol_r = 3 * math.hypot(edge.sigma_radius, rms / math.sqrt(n)) + 0.5
+    tol_c = 3 * math.hypot(math.hypot(edge.sigma_cx, edge.sigma_cy), rms * math.sqrt(2 / n)) + 0.5
+    assert abs(edge.radius - er) < tol_r
+    assert math.hypot(edge.cx - ex, edge.cy - ey) < tol_c
+
+
+def test_the_carrier_frames_detected_aperture_takes_in_no_halo(carrier_edge) -> None:
+    """Pixels of the detected aperture more than 3 px outside the amplitude edge circle.
+
+    Bound: under 1 % of the aperture. 3 px: the detected rim follows the fringe energy's own
+    rim, rough by ~3.5 px RMS about its circle; 1 %: a few such bumps where the edge meets
+    the frame's top and bottom (measured 0.3 %). Before the fringe energy the box variance's
+    aperture took in 3.3 %: halo strips at the top and bottom of the frame (enclosing radius
+    302.5 px against this edge's 284.4).
+    """
+    frame, (ex, ey, er, _, _) = carrier_edge
+    mask = wavefront_from_carrier(frame, sign=-1).aperture.mask
+    rows, cols = np.indices(mask.shape)
+    outside = mask & (np.hypot(cols - ex, rows - ey) > er + 3.0)
+    assert outside.sum() < 0.01 * mask.sum()
+
+
+def test_the_carrier_frame_finds_the_same_mirror(circles) -> None:
+    """The carrier frame's edge circle against the cycles' edge circle: the same mirror.
+
+    Same mirror, camera and magnification. Centre and radius: within 3 combined stated
+    uncertainties plus 0.5 px (the carrier frame was taken at another time: the camera or
+    mirror may have moved by a fraction of a pixel). Measured: 284.6 +- 0.4 px against 284.5.
+    Before the fringe energy the box variance put it at 291.1 +- 0.7 px, 2.3 % wider.
     """
     measured = wavefront_from_carrier(read_frame(PSI / "Image197.jpg"), sign=-1, aperture="circle")
     edge, reference = measured.edge, circles[0].edge
     assert edge is not None and reference is not None
-    assert abs(edge.cx - reference.cx) < 3 * np.hypot(edge.sigma_cx, reference.sigma_cx)
-    assert abs(edge.cy - reference.cy) < 3 * np.hypot(edge.sigma_cy, reference.sigma_cy)
-    assert edge.radius == pytest.approx(reference.radius, rel=0.03)
+    assert abs(edge.cx - reference.cx) < 3 * np.hypot(edge.sigma_cx, reference.sigma_cx) + 0.5
+    assert abs(edge.cy - reference.cy) < 3 * np.hypot(edge.sigma_cy, reference.sigma_cy) + 0.5
+    assert abs(edge.radius - reference.radius) < 3 * np.hypot(edge.sigma_radius, reference.sigma_radius) + 0.5
 
 
 def test_zygo_map_reads_and_its_low_order_terms_are_stable() -> None:
