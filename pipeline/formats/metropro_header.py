@@ -20,11 +20,7 @@ METROPRO_MAGIC = MappingProxyType({0x881B036F: 1, 0x881B0370: 2, 0x881B0371: 3})
 
 
 _HEADER_SIZES = MappingProxyType({1: 834, 2: 834, 3: 4096})  # header format -> header size
-
-
 _PHASE_RESOLUTION = MappingProxyType({0: 4096, 1: 32768, 2: 131072})  # phase_res flag -> R
-
-
 _START = struct.Struct(">IHI")  # magic_number, header_format, header_size
 
 

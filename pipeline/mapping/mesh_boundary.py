@@ -14,11 +14,7 @@ from .mesh_geometry import _cross, _polygon_area
 
 
 _CORNER_TURN = math.radians(50.0)  # turn from which a polygon vertex is kept as a corner
-
-
 _CORNER_WINDOW_PX = 3.0  # smallest arc-length window of the corner test, in pixels
-
-
 _MIN_LOOP_VERTICES = 3
 
 

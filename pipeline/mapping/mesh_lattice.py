@@ -18,8 +18,6 @@ from .mesh_geometry import _member, _signed_areas, _unique_edges
 
 
 _LATTICE_DENSITY = 2.0 / math.sqrt(3.0)  # points per h^2 of an equilateral lattice of spacing h
-
-
 _CLEARANCE = 0.7  # lattice points closer than this many h to the boundary are dropped
 
 
@@ -29,20 +27,10 @@ _CLEARANCE = 0.7  # lattice points closer than this many h to the boundary are d
 # is in it. Qhull gets the lattice points nearer than (_DEEP + _NEAR_MARGIN) h: every point
 # farther away has six deep neighbours, so its whole star is made of core triangles.
 _DEEP = 1.3
-
-
 _NEAR_MARGIN = 1.25
-
-
 _SAMPLE_STEP = 0.1  # spacing of the boundary sampling used for distances, in units of h
-
-
 _COUNT_TOLERANCE = 0.03  # relative vertex-count error below which h is accepted
-
-
 _SPACING_ROUNDS = 4  # estimates of h at most (the first from the area, then corrections)
-
-
 _DEGENERATE_AREA = 1e-12  # Qhull triangles below this many h^2 are flat slivers, dropped
 
 

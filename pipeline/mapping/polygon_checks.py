@@ -13,8 +13,6 @@ FloatArray = NDArray[np.float64]
 
 
 _MIN_VERTICES = 8
-
-
 _PAIR_CHUNK = 1 << 20  # candidate edge pairs tested at once by the self-intersection check
 
 

@@ -13,14 +13,8 @@ from numpy.typing import NDArray
 
 
 _DETECTION_RATIO = 6.0  # sideband peak / median spectrum across it on its ring, to count as a carrier
-
-
 _CENTROID_STEPS = 6  # iterations of the power-centroid refinement of the carrier
-
-
 _CENTROID_FLOOR = 0.01  # power below this fraction of the sideband peak is ignored by the centroid
-
-
 _CROP_REACH = 1.0  # sideband crop radius in units of |f| where no other lobe is nearer (docstring)
 
 

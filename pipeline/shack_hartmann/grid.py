@@ -14,8 +14,6 @@ from .._checks import finite_float, positive_int
 
 
 _MIN_PITCH_PX = 4.0  # smallest lenslet pitch accepted, pixels
-
-
 _EDGE_TOL = 1e-9  # pixels: a window edge this close to a pixel centre counts as on it
 
 

@@ -20,14 +20,8 @@ logger = logging.getLogger(__name__)
 
 
 _PAD = 8  # zero-padding factor of the periodogram in detect_grid
-
-
 _MIN_PERIODS = 4  # detect_grid needs at least this many periods across each axis
-
-
 _LIT_FRACTION = 0.25  # detect_grid: a lenslet is lit above bg + this * (typical peak - bg)
-
-
 _PITCH_MISMATCH = 0.005  # relative row/column pitch difference that detect_grid reports
 
 

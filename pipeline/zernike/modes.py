@@ -12,8 +12,6 @@ Ordering = Literal["noll", "ansi", "fringe"]
 
 
 _ORDERINGS: Final[tuple[str, ...]] = get_args(Ordering)
-
-
 _FIRST_INDEX: Final = MappingProxyType({"noll": 1, "ansi": 0, "fringe": 1})
 
 
