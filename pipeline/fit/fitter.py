@@ -325,11 +325,17 @@ class Fitter:
         mean: float,
         bad: NDArray[np.intp] | None,
     ) -> tuple[NDArray[np.float64], float]:
-        terms = np.concatenate([solved.basis, solved.removed])
-        values = centred.astype(np.float64) + mean - self._operator @ terms
+        # The terms in the operator's own type: a float64 vector against a float32 operator would
+        # make numpy copy the whole operator to float64 on every call (7x the cost of the pass).
+        # The residual is then as exact as the operator (float32: ~1e-7 relative to the map).
+        terms = np.concatenate([solved.basis, solved.removed]).astype(self._operator.dtype)
+        centred_residual = centred - self._operator @ terms  # the mean cancels in the peak-to-valley
         if bad is not None:
-            values[bad] = np.nan
-        return self._scatter(values), float(np.nanmax(values) - np.nanmin(values))
+            centred_residual[bad] = np.nan
+            peak_to_valley = float(np.nanmax(centred_residual)) - float(np.nanmin(centred_residual))
+        else:
+            peak_to_valley = float(centred_residual.max()) - float(centred_residual.min())
+        return self._scatter(centred_residual.astype(np.float64) + mean), peak_to_valley
 
     def _scatter(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
         full = np.full(self.aperture.shape, np.nan)

@@ -332,8 +332,8 @@ def test_each_result_carries_its_residual_pv(station_factory, method: str) -> No
     checked = [(r, o) for r, o in zip(processed, outcomes, strict=True) if r.valid]
     assert len(checked) >= 2, [r.reason for r in processed]  # a loaded machine may lose a set or two
     for result, outcome in checked:
-        # the fitter's own residual map of the same fit (float64 terms; the station's are float32:
-        # maps of a few waves -> a few 1e-7 waves apart)
+        # the fitter's own residual of the same map, recomputed here: the station must report it
+        # unchanged (the tolerance allows float32 rounding on maps of a few waves, ~1e-7 waves)
         reference = outcome.choice.fitter.fit(outcome.waves, nan_policy="omit", residual=True)
         assert result.residual_pv == pytest.approx(reference.residual_pv, abs=2e-6)
         assert result.residual_rms == reference.residual_rms < result.residual_pv  # zero-mean residual: rms <= pv

@@ -23,7 +23,6 @@ from wavestack.station.fitter_cache import FALLBACK_METHOD, FitterCache, FitterC
 from wavestack.station.interferometer import CARRIER_REFRESH_SETS, InterferometerOutcome, SetProcessor
 from wavestack.station.live_view import LiveSnapshot, LiveStats, counter_lines, render_live_view
 from wavestack.station.outputs import PlcOutput, start_up_hold
-from wavestack.station.residual import ResidualPeakToValley
 from wavestack.station.results import (
     ApertureRecord,
     FitDiagnostics,
@@ -53,7 +52,7 @@ __all__ = [
     "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
     "FitterChoice", "FitterDiagnostics", "FrameCounts", "Heartbeat", "InterferometerOutcome", "LensletSlopes",
     "LiveSnapshot", "LiveStats", "MODAL", "OutputRecord", "PhaseStepSource", "PlcOutput", "ProcessorOutcome",
-    "ReconstructorDiagnostics", "ResidualPeakToValley", "ResultSink", "SentCommand", "SetCounts", "SetProcessor",
+    "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetCounts", "SetProcessor",
     "SlopeOutcome", "SlopeProcessor", "Station", "StationDevices", "StationResult", "StationSummary", "TruthCheck",
     "TruthErrors", "build_processor", "coefficient_errors", "configure_camera", "confirm", "counter_lines",
     "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view",

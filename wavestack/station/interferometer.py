@@ -16,8 +16,8 @@ The stages are the signal path's (``wavestack.pipeline``'s measurement) arranged
 4. **fit** — on every ``fit_decimation``-th pixel in each direction. Thirty-six Zernike terms
    are determined many times over by a quarter of a megapixel map, and decimating by 2 cuts both
    the refit and, more importantly, the fitter build on an aperture change by four. The fit's
-   residual RMS comes with it; its peak-to-valley (:mod:`~wavestack.station.residual`) costs
-   one more float32 pass over the fitter's operator and is timed with the fit.
+   residual RMS comes with it; its peak-to-valley (``fit(..., residual=True)``) costs one more
+   pass over the fitter's operator, in the operator's float32, and is timed with the fit.
 """
 
 from __future__ import annotations
@@ -49,7 +49,6 @@ from wavestack.station.aperture_confirmation import (
     confirm,
 )
 from wavestack.station.fitter_cache import FitterCache, FitterChoice
-from wavestack.station.residual import ResidualPeakToValley
 from wavestack.station.results import ApertureRecord, FitDiagnostics
 
 logger = logging.getLogger(__name__)
@@ -162,7 +161,6 @@ class SetProcessor:
         self._unwrapper = TemporalUnwrapper(max_residues=settings.max_residues,
                                             params=SpatialParams(prefilter_sigma_px=prefilter_px))
         self.fitters = FitterCache(settings.fit_settings(), background=background_builds)
-        self._residual_pv = ResidualPeakToValley()
 
     def close(self) -> None:
         """Stop the background fitter builds."""
@@ -223,7 +221,7 @@ class SetProcessor:
         if fitter_method is not None and choice.kind != fitter_method:
             choice = self.fitters.use_method(fitter_method)
         try:
-            fit = choice.fitter.fit(waves, nan_policy="omit")
+            fit = choice.fitter.fit(waves, nan_policy="omit", residual=True)
         except InvalidFrame as error:
             return self._invalid(f"fit: {error}", choice=choice, aperture=aperture, aperture_changed=changed,
                                 unwrap_path=unwrapped.path, timings_s=timings)
@@ -233,13 +231,9 @@ class SetProcessor:
                                 f"max_residual_waves = {self.settings.max_residual_waves:g}",
                                 choice=choice, aperture=aperture, aperture_changed=changed,
                                 unwrap_path=unwrapped.path, timings_s=timings)
-        tick = time.perf_counter()
-        # one float32 pass over the fitter's operator, like a refit: 0.8-1.0 ms per result on the
-        # default station, where fit(residual=True) costs 6.4-6.6 ms (see station.residual). Timed as fit.
-        residual_pv = self._residual_pv(choice.fitter, waves, fit)
-        timings["fit"] += time.perf_counter() - tick
+        assert fit.residual_pv is not None  # asked for above
         return InterferometerOutcome(True, None, fit.coefficients, fit, choice, aperture, changed, unwrapped.path,
-                                     waves, timings, residual_pv)
+                                     waves, timings, fit.residual_pv)
 
     def fit_map(self, waves: NDArray[np.float64], choice: FitterChoice) -> FitResult:
         """Fit a full-resolution map with a given fitter (the simulator's truth, for comparison)."""
