@@ -363,3 +363,16 @@ def test_close_is_idempotent_and_final() -> None:
         camera.read_frame(0.05)
     with pytest.raises(DeviceDisconnected):
         camera.start()
+
+
+def test_frames_pending_at_close_are_not_delivered() -> None:
+    """Closing is final: a frame the reader had put in the ring before the close is not read after it."""
+    camera = U3VCamera.open(backend=SimulatedUsbBackend([sim()]), timeout_s=TIMEOUT_S)
+    camera.start()
+    deadline = time.monotonic() + TIMEOUT_S
+    while camera.counters().pending == 0:
+        assert time.monotonic() < deadline, "no frame reached the ring"
+        time.sleep(0.005)
+    camera.close()
+    with pytest.raises(DeviceDisconnected):
+        camera.read_frame(0.05)
