@@ -19,7 +19,7 @@ from wavestack.pipeline.aperture.region import Aperture, EmptyAperture, Topology
 from wavestack.pipeline.aperture.compare import ApertureTracker, aperture_iou
 from wavestack.pipeline.aperture.detect import DetectionSettings, detect_aperture
 
-from shared_data import DATA
+from shared_data import DATA, require_shared_data
 
 _DATA = DATA / "psi-mirror-654nm"
 
@@ -358,6 +358,7 @@ def test_tracker_rejects_non_aperture() -> None:
 # ----------------------------------------------------------------------------- real data
 
 
+@require_shared_data()
 def test_real_cycle_finds_the_mirror_not_the_halo(cycle_map: NDArray[np.float64]) -> None:
     """Image5..10: one disk of radius ~285 px with its central speck; the halo is excluded.
 
@@ -390,6 +391,7 @@ def test_real_cycle_finds_the_mirror_not_the_halo(cycle_map: NDArray[np.float64]
     assert not aperture.mask[ring].any()
 
 
+@require_shared_data()
 def test_real_tilted_set_gives_the_same_circle(
     cycle_map: NDArray[np.float64], tilted_map: NDArray[np.float64]
 ) -> None:
