@@ -14,6 +14,8 @@ from collections.abc import Iterator
 
 import pytest
 
+import fuzz  # noqa: F401  (registers the Hypothesis profiles "ci" and "long")
+
 _GRACE_S = 2.0  # time a finishing thread or a closing socket gets before it counts as leaked
 
 
