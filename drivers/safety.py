@@ -112,7 +112,9 @@ class SafetyStage:
 
     Notes
     -----
-    Not thread-safe: one owner (the station's loop) calls :meth:`update`.
+    Not thread-safe: one owner (the station's loop) calls :meth:`update`, or :meth:`propose` and
+    :meth:`commit`. The stage does no I/O: :meth:`propose` never changes the last output, so an
+    output that may be refused proposes, sends, and commits only what was acknowledged.
 
     Examples
     --------
@@ -142,6 +144,13 @@ class SafetyStage:
     def last_output(self) -> NDArray[np.float64]:
         """Copy of the last output, shape (n,) (``safe_value`` before the first update)."""
         return self._last.copy()
+
+    def commit(self, values: ArrayLike) -> None:
+        """Record what the actuator really holds now: a proposal it acknowledged (see :meth:`propose`).
+
+        Same checks as :meth:`reset`; the rate limit of the next proposal counts from ``values``.
+        """
+        self.reset(values)
 
     def reset(self, values: ArrayLike) -> None:
         """Set the last output, e.g. to the actuator's read-back after a reconnect.
@@ -176,7 +185,28 @@ class SafetyStage:
         now_s: float,
         reason: str | None = None,
     ) -> SafeOutput:
-        """Filter one request and return what may be sent to the actuator.
+        """:meth:`propose`, then take the proposal as the last output at once (an actuator that cannot refuse).
+
+        For an output that can refuse or lose a command (a PLC), use :meth:`propose` and
+        :meth:`commit` only what the actuator acknowledged.
+        """
+        out = self.propose(requested, valid=valid, measured_at_s=measured_at_s, now_s=now_s, reason=reason)
+        self._last = np.array(out.values)
+        return out
+
+    def propose(
+        self,
+        requested: ArrayLike | None,
+        *,
+        valid: bool = True,
+        measured_at_s: float,
+        now_s: float,
+        reason: str | None = None,
+    ) -> SafeOutput:
+        """Filter one request and return what may be sent to the actuator; the last output stays.
+
+        The proposal counts from the last *committed* output (:meth:`commit`, :meth:`reset`), so a
+        command the actuator refused or lost never moves the base of the rate limit.
 
         Parameters
         ----------
@@ -224,8 +254,6 @@ class SafetyStage:
             self._holding = False
         status |= action
         reasons.extend(action_reasons)
-
-        self._last = values
         return SafeOutput(
             values=read_only_copy(values),
             status=status,

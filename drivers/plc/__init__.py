@@ -4,6 +4,8 @@
 - :mod:`.register_map`: the register map, the command block's layout and the write allow-list.
 - :mod:`.status`: status word, acknowledge and machine outputs as frozen values.
 - :mod:`.transport`: one pymodbus client with typed errors and capped reconnect back-off.
+- :mod:`.commands`: command limits and the command the machine holds (pure bookkeeping).
+- :mod:`.gate`: when the PLC may get a command (pure).
 - :mod:`.driver`: :class:`PolishingLink`, heartbeat, command handshake, self-check, re-arm.
 """
 
@@ -20,7 +22,8 @@ from wavestack.drivers.plc.codec import (
     encode_uint32,
     round_to_float32,
 )
-from wavestack.drivers.plc.driver import HeartbeatEchoStale, PolishingLink
+from wavestack.drivers.plc.commands import CommandLimits, CommandRefused
+from wavestack.drivers.plc.driver import HeartbeatEchoStale, PlcNotReady, PolishingLink
 from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused
 from wavestack.drivers.plc.status import CommandAck, MachineOutputs, PlcStatus, StatusBit, decode_outputs, decode_status
 from wavestack.drivers.plc.transport import LinkTiming, PlcRefused
@@ -28,9 +31,12 @@ from wavestack.drivers.plc.transport import LinkTiming, PlcRefused
 __all__ = [
     "WORD_ORDERS",
     "CommandAck",
+    "CommandLimits",
+    "CommandRefused",
     "HeartbeatEchoStale",
     "LinkTiming",
     "MachineOutputs",
+    "PlcNotReady",
     "PlcRefused",
     "PlcStatus",
     "PolishingLink",

@@ -4,9 +4,15 @@
 pymodbus ``ModbusTcpClient``) and adds what a closed loop needs from a PLC link:
 
 - a heartbeat the host increments every cycle, with a check that the PLC logic echoes it;
-- a command id / acknowledge handshake: a removal command takes effect once, when the PLC sees its
-  id change; the PLC reports the last accepted id; resending the same id is harmless, so a command
-  whose reply was lost is simply sent again;
+- a command id / acknowledge handshake: a command takes effect once, when the PLC sees its id
+  change; within one call a command whose reply was lost is resent with the same id (harmless);
+- a gate before every command (:mod:`.gate`): a status read, and nothing is sent unless the PLC is
+  scanning (echo fresh, also at the last heartbeat), ready, not busy, not tripped, no e-stop;
+- the command the machine holds (:mod:`.commands`): a command whose fate is unknown after all
+  retries is settled from the PLC's last accepted id before anything else is sent (nothing is sent
+  while it cannot be); an unknown held command is read back from the output block;
+- command limits (:class:`CommandLimits`: ``|removal|`` and the step from the held command), checked
+  before the wire (:class:`CommandRefused`); :meth:`PolishingLink.restrict` only tightens them;
 - a start-up self-check of the float32 byte order that fails closed;
 - a write allow-list (:meth:`RegisterMap.check_write`) enforced before anything reaches the wire;
 - typed errors from :mod:`wavestack.drivers.errors`, each naming the unit id, register and function
@@ -29,10 +35,12 @@ import time
 from collections.abc import Sequence
 from types import TracebackType
 
+import numpy as np
 from numpy.typing import ArrayLike
 
 from wavestack.drivers.errors import DeviceTimeout, ProtocolError
-from wavestack.drivers.plc.codec import WORD_ORDERS, decode_float32, round_to_float32
+from wavestack.drivers.plc.commands import CommandLedger, CommandLimits, CommandRefused
+from wavestack.drivers.plc.gate import HeartbeatEchoStale, PlcNotReady, decode_self_check, echo_lag_error, not_ready
 from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, registers_fit
 from wavestack.drivers.plc.status import (
     CommandAck,
@@ -44,15 +52,12 @@ from wavestack.drivers.plc.status import (
 )
 from wavestack.drivers.plc.transport import LinkTiming, ModbusTransport, PlcRefused, deadline_after
 
-__all__ = ["HeartbeatEchoStale", "LinkTiming", "PlcRefused", "PolishingLink"]
+__all__ = ["CommandLimits", "CommandRefused", "HeartbeatEchoStale", "LinkTiming", "PlcNotReady", "PlcRefused",
+           "PolishingLink"]
 
 _log = logging.getLogger(__name__)
 
 _WATCHDOG_EXCEPTION = 4
-
-
-class HeartbeatEchoStale(ProtocolError):
-    """The PLC answers but its logic no longer echoes the heartbeat (stopped or frozen program)."""
 
 
 class PolishingLink:
@@ -66,33 +71,37 @@ class PolishingLink:
         Addresses, function codes and byte orders (from the configuration).
     timing
         Timeouts, back-off and retry policy.
+    command_limits
+        Limits every removal command must meet (checked before the wire); None: none yet (a station
+        sets them through :meth:`restrict` before its first command).
+    monitor
+        An operator's second client (``wavestack plc status|rearm``) while a station runs: it never
+        writes the heartbeat (that would disturb the station's echo) and never sends a command.
 
     Notes
     -----
-    Typical use by a station::
-
-        with PolishingLink(host, port, register_map) as link:
-            link.connect(timeout_s=5.0)
-            link.self_check(timeout_s=1.0)          # fails closed on a wrong byte order
-            while running:
-                status = link.heartbeat(timeout_s=0.5)   # once per cycle
-                if have_new_measurement and status.can_accept_command:
-                    link.send_removal(next_id, removal_nm, passes=1, timeout_s=2.0)
+    Typical use: ``connect``, ``self_check`` (fails closed on a wrong byte order), then per cycle
+    ``heartbeat`` and, for a new measurement, ``send_removal(link.next_command_id(), removal_nm, ...)``.
     """
 
-    def __init__(self, host: str, port: int, register_map: RegisterMap, timing: LinkTiming | None = None) -> None:
+    def __init__(self, host: str, port: int, register_map: RegisterMap, timing: LinkTiming | None = None, *,
+                 command_limits: CommandLimits | None = None, monitor: bool = False) -> None:
         if not 0 < port <= 65535:
             raise ValueError(f"port must be 1..65535, got {port}")
         self._map = register_map
         self._timing = timing or LinkTiming()
         self._device = f"PLC unit {register_map.unit_id} at {host}:{port}"
         self._lock = threading.RLock()
+        self._monitor = monitor
         self._transport = ModbusTransport(host, port, register_map.unit_id, self._device, self._timing,
                                           on_connect=self._resume_heartbeat)
         self._beat = 0
         self._heartbeat_pending = True
+        self._echo_stale = False
         self._self_check_passed = False
         self._sent_commands: dict[int, tuple[int, ...]] = {}
+        self._limits = command_limits
+        self._ledger = CommandLedger()
 
     # ----------------------------------------------------------------------------- public API
     @property
@@ -114,6 +123,25 @@ class PolishingLink:
     def reconnects(self) -> int:
         """Connections opened after the first one (after losses, timeouts or malformed replies)."""
         return self._transport.reconnects
+
+    @property
+    def command_limits(self) -> CommandLimits | None:
+        """The limits every command is checked against (None: no host-side limits set)."""
+        return self._limits
+
+    def restrict(self, limits: CommandLimits) -> CommandLimits:
+        """Tighten the command limits (each limit becomes the stricter of the old and ``limits``); returns them.
+
+        Limits can never be loosened on a link: whoever holds it commands within the tightest ever set.
+        """
+        with self._lock:
+            self._limits = limits.tightened(self._limits)
+            return self._limits
+
+    def next_command_id(self) -> int:
+        """A fresh command id: after every id this link used or saw accepted, never the PLC's last accepted."""
+        with self._lock:
+            return self._ledger.next_id()
 
     def connect(self, timeout_s: float) -> PlcStatus:
         """Open the connection (retrying with back-off until ``timeout_s``), send a heartbeat, read status.
@@ -147,18 +175,8 @@ class PolishingLink:
         block = self._map.self_check
         with self._lock:
             self._self_check_passed = False
-            registers = self._read_block(block, deadline)
-            assert block.word_order is not None
-            value = decode_float32(registers, block.word_order)
-            expected = round_to_float32(self._map.self_check_value)
-            if value != expected:
-                matching = [o for o in WORD_ORDERS if decode_float32(registers, o) == expected]
-                hint = (f"it decodes correctly with word order {matching[0]}" if matching else
-                        "no byte order decodes it: check the register address and the constant")
-                raise ProtocolError(self._device, f"start-up self-check failed: registers {block.start}-"
-                                    f"{block.stop - 1} = {registers} decode to {value!r} with the configured "
-                                    f"word order {block.word_order}, expected {expected!r}; {hint}. "
-                                    "Commands are refused until the self-check passes.")
+            value = decode_self_check(self._device, block, self._read_block(block, deadline),
+                                      self._map.self_check_value)
             self._self_check_passed = True
             _log.info("%s: self-check passed (%r with word order %s)", self._device, value, block.word_order)
             return value
@@ -177,25 +195,29 @@ class PolishingLink:
         """
         deadline = deadline_after(timeout_s)
         with self._lock:
+            if self._monitor:
+                raise ProtocolError(self._device, "a monitor link writes no heartbeat (the station owns it)")
             was_open = self._transport.ensure_connected(deadline)  # a new connection already beat once
             if was_open or self._heartbeat_pending:
                 self._send_heartbeat(deadline)
             status = self._read_status(deadline)
-            lag = (self._beat - (status.heartbeat_echo or 0)) & 0xFFFF
-            if not status.watchdog_tripped and lag > self._timing.heartbeat_echo_max_lag:
-                raise HeartbeatEchoStale(self._device, f"heartbeat echo (register {self._map.status.start + 2}) "
-                                         f"is {status.heartbeat_echo} while the host sent {self._beat}: "
-                                         f"{lag} beats behind, expected at most "
-                                         f"{self._timing.heartbeat_echo_max_lag}; the PLC program is not scanning")
+            stale = self._echo_lag_error(status)
+            self._echo_stale = stale is not None
+            if stale is not None:
+                raise stale
             return status
 
     def send_removal(self, command_id: int, removal_nm: ArrayLike, passes: int, timeout_s: float) -> CommandAck:
         """Send one removal command and wait for the PLC to acknowledge its id.
 
+        First the gate (status read), the settling of an unresolved command, a read-back of an
+        unknown held command, and the limits against the held command; then the write.
+
         Parameters
         ----------
         command_id
-            1..65535, new for every command; resending an id (a retry) never applies it twice.
+            1..65535, new for every command (:meth:`next_command_id`); resending an id with the same
+            values (a retry) never applies it twice.
         removal_nm
             Removal per term in nm, shape (n_terms,), already through the safety stage.
         passes
@@ -211,47 +233,48 @@ class PolishingLink:
         Raises
         ------
         ValueError
-            Bad arguments, or an id already sent with different parameters (nothing sent).
+            Bad arguments; an id already sent with other values, or the PLC's last accepted id (a
+            programming error, never a wire fault: use :meth:`next_command_id`). Nothing sent.
+        CommandRefused
+            Outside the :class:`CommandLimits`; nothing sent.
+        PlcNotReady
+            The gate: not scanning, tripped, e-stop, not ready or busy; nothing sent.
         ProtocolError
-            The self-check has not passed, or the PLC did not acknowledge the id.
+            The self-check has not passed, or the PLC did not acknowledge the id (then unresolved:
+            the next call settles it from the PLC's status before sending anything).
         PlcRefused
             The PLC refused the command (3: a parameter out of range; 4: watchdog/e-stop; 6: busy).
         DeviceTimeout, DeviceDisconnected
             After the retries, or at once on a connection loss.
         """
         registers = tuple(self._map.encode_command(command_id, passes, removal_nm))
+        values = np.asarray(removal_nm, dtype=np.float64)
         deadline = deadline_after(timeout_s)
         with self._lock:
             previous = self._sent_commands.get(command_id)
             if previous is not None and previous != registers:
                 raise ValueError(f"{self._device}: command id {command_id} was already sent with other "
                                  "parameters; the PLC would ignore it (use a new id)")
-            if not self._self_check_passed:
-                raise ProtocolError(self._device, "refusing to send a command: the start-up self-check has not "
-                                    "passed (call self_check first)")
+            self._check_may_command()
+            self._transport.ensure_connected(deadline)
+            if self._heartbeat_pending:
+                self._send_heartbeat(deadline)  # heartbeat resumes before any command
+            held = self._gate(command_id, values, deadline)
+            if previous is None and command_id == self._ledger.plc_accepted:
+                raise ValueError(f"{self._device}: command id {command_id} is the PLC's last accepted id; it would "
+                                 "ignore it (use next_command_id())")
+            if self._limits is not None and (previous is None or self._ledger.held_id != command_id):
+                why = self._limits.violation(values, held)
+                if why is not None:
+                    raise CommandRefused(self._device, f"command {command_id} refused before the wire: {why}")
             self._sent_commands = {command_id: registers}  # only the latest id matters for retries
-            attempts = 0
-            while True:
-                attempts += 1
-                try:
-                    self._transport.ensure_connected(deadline)
-                    if self._heartbeat_pending:
-                        self._send_heartbeat(deadline)  # heartbeat resumes before any command
-                    self._write(self._map.command.start, list(registers), self._map.command.write_function or 16,
-                                deadline)
-                    break
-                except PlcRefused:
-                    self._sent_commands = {}  # refused, never accepted: the id may be reused
-                    raise
-                except (DeviceTimeout, ProtocolError) as error:
-                    if attempts > self._timing.command_retries or time.monotonic() >= deadline:
-                        raise
-                    _log.warning("%s: command %d, attempt %d failed (%s); resending the same id",
-                                 self._device, command_id, attempts, error.detail)
+            self._ledger.sending(command_id, values)
+            attempts = self._write_command(command_id, registers, deadline)
             status = self._read_status(deadline)
             if status.last_accepted_id != command_id:
                 raise ProtocolError(self._device, f"command {command_id} was written but the PLC reports last "
                                     f"accepted id {status.last_accepted_id} (register {self._map.status.start + 1})")
+            self._ledger.accepted()
             return CommandAck(command_id=command_id, attempts=attempts, status=status)
 
     def read_status(self, timeout_s: float) -> PlcStatus:
@@ -277,14 +300,16 @@ class PolishingLink:
             return decode_outputs(registers, block.word_order)
 
     def rearm(self, timeout_s: float) -> PlcStatus:
-        """Write 1 to the re-arm register, resume the heartbeat and return the status."""
+        """Write 1 to the re-arm register, resume the heartbeat (not on a monitor link) and return the status."""
         deadline = deadline_after(timeout_s)
         block = self._map.rearm
         with self._lock:
             self._transport.ensure_connected(deadline)
+            self._ledger.invalidate()  # the watchdog zeroed the outputs: read them back before a command
             self._write(block.start, [1], block.write_function or 6, deadline)
-            _log.warning("%s: watchdog re-armed by the host", self._device)
-            self._send_heartbeat(deadline)
+            _log.warning("%s: watchdog re-armed by the host%s", self._device, " (monitor link)" if self._monitor else "")
+            if not self._monitor:
+                self._send_heartbeat(deadline)
             return self._read_status(deadline)
 
     def read_registers(self, address: int, count: int, timeout_s: float) -> list[int]:
@@ -331,9 +356,68 @@ class PolishingLink:
                 return block.write_function or 16
         return 16
 
+    def _check_may_command(self) -> None:
+        """Refuse at once (nothing on the wire) a command this link may not send at all."""
+        if self._monitor:
+            raise ProtocolError(self._device, "refusing to send a command: a monitor link sends none")
+        if not self._self_check_passed:
+            raise ProtocolError(self._device, "refusing to send a command: the start-up self-check has not "
+                                "passed (call self_check first)")
+        if self._echo_stale:
+            raise PlcNotReady(self._device, "refusing to send a command: the last heartbeat showed a stale echo "
+                              "(the PLC program is not scanning)")
+
+    def _echo_lag_error(self, status: PlcStatus) -> HeartbeatEchoStale | None:
+        return echo_lag_error(self._device, self._beat, status, self._timing.heartbeat_echo_max_lag,
+                              self._map.status.start + 2)
+
+    def _gate(self, command_id: int, values: np.ndarray, deadline: float) -> np.ndarray:
+        """Read the status; refuse unless the PLC can take a command; settle the held command; return it."""
+        status = self._read_status(deadline)
+        stale = self._echo_lag_error(status)
+        if stale is not None:
+            self._echo_stale = True
+            raise PlcNotReady(self._device, f"refusing command {command_id}: {stale.detail}")
+        why = not_ready(status)
+        if why is not None:
+            raise PlcNotReady(self._device, f"refusing command {command_id}: the PLC is {why}")
+        settled = self._ledger.resolve(status.last_accepted_id)
+        if settled is not None:
+            _log.warning("%s: %s", self._device, settled)
+        if self._ledger.needs_read_back(status.last_accepted_id):
+            block = self._map.output
+            assert block.word_order is not None
+            outputs = decode_outputs(self._read_block(block, deadline), block.word_order)
+            self._ledger.read_back(status.last_accepted_id, outputs.setpoint_nm)
+            _log.info("%s: the machine holds %s nm (read back)", self._device, outputs.setpoint_nm.tolist())
+        assert self._ledger.held_nm is not None
+        return self._ledger.held_nm
+
+    def _write_command(self, command_id: int, registers: tuple[int, ...], deadline: float) -> int:
+        """Write the command block, resending the same id after a timeout or malformed reply; the attempts."""
+        attempts = 0
+        while True:
+            attempts += 1
+            try:
+                self._transport.ensure_connected(deadline)
+                self._write(self._map.command.start, list(registers), self._map.command.write_function or 16,
+                            deadline)
+                return attempts
+            except PlcRefused:
+                self._sent_commands = {}  # refused, never accepted: the id may be reused
+                self._ledger.refused()
+                raise
+            except (DeviceTimeout, ProtocolError) as error:
+                if attempts > self._timing.command_retries or time.monotonic() >= deadline:
+                    raise
+                _log.warning("%s: command %d, attempt %d failed (%s); resending the same id",
+                             self._device, command_id, attempts, error.detail)
+
     def _resume_heartbeat(self, deadline: float) -> None:
         """First requests on a new connection: continue from the PLC's heartbeat register and beat."""
         self._heartbeat_pending = True
+        if self._monitor:
+            return
         block = self._map.heartbeat
         try:
             self._beat = self._transport.read(block.start, 1, block.read_function, deadline)[0]
@@ -350,11 +434,14 @@ class PolishingLink:
 
     def _read_status(self, deadline: float) -> PlcStatus:
         try:
-            return decode_status(self._read_block(self._map.status, deadline))
+            status = decode_status(self._read_block(self._map.status, deadline))
         except PlcRefused as error:
             if error.exception_code == _WATCHDOG_EXCEPTION:
+                self._ledger.invalidate()  # the watchdog zeroes the outputs
                 return tripped_status()
             raise
+        self._ledger.saw_accepted_id(status.last_accepted_id)
+        return status
 
     def _read_block(self, block: RegisterBlock, deadline: float) -> list[int]:
         self._transport.ensure_connected(deadline)
@@ -362,4 +449,10 @@ class PolishingLink:
 
     def _write(self, address: int, values: list[int], function_code: int, deadline: float) -> None:
         self._map.check_write(address, len(values), function_code)  # the allow-list, before the wire
-        self._transport.write(address, values, function_code, deadline)
+        try:
+            self._transport.write(address, values, function_code, deadline)
+        except PlcRefused as error:
+            if error.exception_code == _WATCHDOG_EXCEPTION:
+                self._ledger.invalidate()  # tripped (outputs zeroed) or e-stop: read the outputs back
+            raise
+

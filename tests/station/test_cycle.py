@@ -12,6 +12,7 @@ import pytest
 
 from wavestack.config import OutputSettings
 from wavestack.drivers.frames import Frame
+from wavestack.drivers.plc import MachineOutputs
 from wavestack.station import (
     ApertureRecord,
     Counters,
@@ -119,13 +120,25 @@ class _Status:
     watchdog_tripped: bool = False
     ready: bool = True
     estop: bool = False
+    busy: bool = False
+    raw_word: int = 17
 
 
 class _FakeLink:
-    """The three calls the output stage makes, recorded (a stand-in for a PolishingLink)."""
+    """The calls the output stage makes, recorded (a stand-in for a PolishingLink)."""
 
-    def __init__(self) -> None:
+    def __init__(self, n_terms: int = 5) -> None:
         self.sent: list[tuple[int, tuple[float, ...], int]] = []
+        self.n_terms = n_terms
+
+    def restrict(self, limits: object) -> object:
+        return limits
+
+    def next_command_id(self) -> int:
+        return len(self.sent) + 1
+
+    def read_outputs(self, timeout_s: float) -> MachineOutputs:
+        return MachineOutputs(False, 0, np.zeros(self.n_terms))  # a machine holding nothing yet
 
     def read_status(self, timeout_s: float) -> _Status:
         return _Status()
@@ -152,12 +165,13 @@ def test_the_output_stage_returns_what_it_sent() -> None:
     result = make_result(0, frames, outcome, ordering="noll", counters=ONE_SET, now_ns=now)
     record = output.send(result)
     scale = 600.0 * settings.surface_factor * settings.gain  # nm of surface per wave of wavefront
-    assert record.heartbeat == Heartbeat(True, watchdog_tripped=False, ready=True, estop=False)
+    assert record.heartbeat == Heartbeat(True, watchdog_tripped=False, ready=True, estop=False, state="NOT_ARMED")  # armed by this very result
     assert record.sent and record.command.command_id == 1 and record.command.status == "OK"
     assert record.command.values_nm == pytest.approx((0.0, 0.0, 0.0, 0.01 * scale, -0.02 * scale))
     assert link.sent == [(1, record.command.values_nm, settings.passes)]
     lost = output.device_lost("device: gone", time.time_ns())
-    assert lost.heartbeat is None and not lost.sent and "HELD" in lost.command.status
+    assert lost.heartbeat is not None and lost.heartbeat.ok  # a device fault is not a host fault: still beating
+    assert not lost.sent and "HELD" in lost.command.status
 
 
 def test_with_output_measures_the_latency_to_the_end_of_the_send() -> None:
@@ -191,7 +205,7 @@ def _warnings(caplog: pytest.LogCaptureFixture) -> list[str]:
 
 
 def test_the_output_is_armed_by_the_first_fresh_result_and_only_then_warns(caplog: pytest.LogCaptureFixture) -> None:
-    link = _FakeLink()
+    link = _FakeLink(2)
     settings = OutputSettings(first_term=1, gain=1.0, max_removal_nm=100.0, max_step_nm=1000.0)
     output = PlcOutput(link, settings, 2, wavelength_nm=600.0, max_age_s=1.0, timeout_s=1.0)  # type: ignore[arg-type]
     request = np.array([0.01, 0.02])
@@ -213,7 +227,7 @@ def test_the_output_is_armed_by_the_first_fresh_result_and_only_then_warns(caplo
 
 
 def test_a_device_lost_before_the_output_is_armed_still_warns(caplog: pytest.LogCaptureFixture) -> None:
-    output = PlcOutput(_FakeLink(), OutputSettings(), 2, wavelength_nm=600.0, max_age_s=1.0,  # type: ignore[arg-type]
+    output = PlcOutput(_FakeLink(2), OutputSettings(), 2, wavelength_nm=600.0, max_age_s=1.0,  # type: ignore[arg-type]
                        timeout_s=1.0)
     caplog.set_level(logging.INFO)
     lost = output.device_lost("device: camera unplugged", 20_000_000_000)

@@ -80,19 +80,40 @@ FitterDiagnostics = Union[FitDiagnostics, ReconstructorDiagnostics]
 
 @dataclass(frozen=True)
 class Heartbeat:
-    """One PLC heartbeat: the PLC's status, or the error that stopped the exchange."""
+    """One PLC heartbeat: the PLC's status, or the error that stopped the exchange.
+
+    Attributes
+    ----------
+    ok : bool
+        The heartbeat was written and the status read with a fresh echo.
+    watchdog_tripped, ready, estop : bool or None
+        From the status (``watchdog_tripped`` also when the heartbeat was refused by a trip).
+    error : str or None
+        Why the exchange failed.
+    state : str or None
+        The output's mode after this heartbeat (:class:`~wavestack.station.output_state.OutputMode`
+        name, e.g. ``"ARMED"``, ``"TRIPPED"``), JSON key ``plc_state``.
+    """
 
     ok: bool
     watchdog_tripped: bool | None = None
     ready: bool | None = None
     estop: bool | None = None
     error: str | None = None
+    state: str | None = None
 
     def to_json(self) -> dict[str, object]:
+        record: dict[str, object]
         if not self.ok:
-            return {"heartbeat": False, "error": self.error}
-        return {"heartbeat": True, "watchdog_tripped": self.watchdog_tripped, "ready": self.ready,
-                "estop": self.estop}
+            record = {"heartbeat": False, "error": self.error}
+            if self.watchdog_tripped:
+                record["watchdog_tripped"] = True
+        else:
+            record = {"heartbeat": True, "watchdog_tripped": self.watchdog_tripped, "ready": self.ready,
+                      "estop": self.estop}
+        if self.state is not None:
+            record["plc_state"] = self.state
+        return record
 
 
 @dataclass(frozen=True)
@@ -105,10 +126,13 @@ class SentCommand:
     command_id : int or None
         The PLC command id, when sent.
     status : str
-        The safety flags, e.g. ``"CLIPPED|RATE_LIMITED"`` or ``"HELD|STALE"`` (``"OK"`` for none).
+        The safety flags, e.g. ``"CLIPPED|RATE_LIMITED"`` or ``"HELD|STALE"`` (``"OK"`` for none);
+        ``"HELD|TRIPPED"`` and the like when the output's mode sends nothing; ``"...|NOT_SENT"``
+        when the PLC did not take the command.
     reason : str or None
     values_nm : tuple of float
-        The removal per PLC term after the safety stage, nm.
+        The removal per PLC term after the safety stage, nm (when not sent: what the machine holds
+        as far as the host knows).
     """
 
     sent: bool
@@ -124,7 +148,7 @@ class SentCommand:
 
 @dataclass(frozen=True)
 class OutputRecord:
-    """What the output stage did for one result: the heartbeat (none after a lost device) and the command."""
+    """What the output stage did for one result: the heartbeat and the command."""
 
     heartbeat: Heartbeat | None
     command: SentCommand

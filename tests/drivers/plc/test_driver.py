@@ -21,6 +21,7 @@ from wavestack.drivers.plc import (
     WORD_ORDERS,
     HeartbeatEchoStale,
     LinkTiming,
+    PlcNotReady,
     PlcRefused,
     PolishingLink,
     RegisterMap,
@@ -177,9 +178,10 @@ def test_watchdog_trips_when_heartbeats_stop_and_the_driver_reports_it() -> None
         with pytest.raises(PlcRefused, match="exception 4") as caught:
             link.heartbeat(timeout_s=1.0)
         assert (caught.value.exception_code, caught.value.function_code, caught.value.address) == (4, 6, 10)
-        with pytest.raises(PlcRefused) as refused:
+        writes = sum(r.function_code == 16 for r in sim.requests)
+        with pytest.raises(PlcNotReady, match="tripped"):  # the gate: nothing reaches the wire
             link.send_removal(2, REMOVAL_NM, passes=1, timeout_s=1.0)
-        assert refused.value.exception_code == 4 and sim.accepted_commands == [1]
+        assert sim.accepted_commands == [1] and sum(r.function_code == 16 for r in sim.requests) == writes
         with pytest.raises(PlcRefused):
             link.read_outputs(timeout_s=1.0)
         rearmed = link.rearm(timeout_s=1.0)
@@ -300,13 +302,14 @@ def test_estop_and_busy_refuse_commands() -> None:
         sim.faults.estop = True
         status = link.read_status(timeout_s=1.0)
         assert status.estop and status.fault and not status.ready and not status.can_accept_command
-        with pytest.raises(PlcRefused, match="exception 4"):
+        with pytest.raises(PlcNotReady, match="emergency stop"):  # the gate: the status read before it
             link.send_removal(1, REMOVAL_NM, passes=1, timeout_s=1.0)
         sim.faults.estop = False
         assert link.send_removal(1, REMOVAL_NM, passes=1, timeout_s=1.0).status.busy
-        with pytest.raises(PlcRefused, match="exception 6"):
+        with pytest.raises(PlcNotReady, match="busy"):
             link.send_removal(2, REMOVAL_NM, passes=1, timeout_s=1.0)
         assert sim.accepted_commands == [1]
+        assert [r.values[0] for r in sim.requests if r.function_code == 16] == [1]  # only the accepted one
 
 
 def test_no_server_fails_with_device_disconnected_and_backs_off() -> None:

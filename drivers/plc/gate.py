@@ -1,0 +1,87 @@
+"""When the PLC may get a command: the readiness gate the link applies before every command (pure).
+
+A PLC that is not scanning (its logic no longer echoes the heartbeat), whose watchdog has tripped,
+whose emergency stop is pressed, that is not ready or busy gets no command; the link says why with
+:class:`PlcNotReady` and sends nothing. A latched fault bit alone (the last command was refused)
+does not block: the next valid command clears it. The start-up self-check of the float32 byte
+order (:func:`decode_self_check`) is the first gate: a link whose check failed sends nothing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from wavestack.drivers.errors import DeviceError, ProtocolError
+from wavestack.drivers.plc.codec import WORD_ORDERS, decode_float32, round_to_float32
+from wavestack.drivers.plc.register_map import RegisterBlock
+from wavestack.drivers.plc.status import PlcStatus
+
+__all__ = ["HeartbeatEchoStale", "PlcNotReady", "decode_self_check", "echo_lag_error", "not_ready"]
+
+
+class HeartbeatEchoStale(ProtocolError):
+    """The PLC answers but its logic no longer echoes the heartbeat (stopped or frozen program)."""
+
+
+class PlcNotReady(DeviceError):
+    """The PLC cannot take a command now (not scanning, tripped, e-stop, not ready or busy); nothing was sent."""
+
+
+def not_ready(status: PlcStatus) -> str | None:
+    """Why a PLC in ``status`` may not get a command, or None when it may."""
+    if status.watchdog_tripped:
+        return "tripped (watchdog): an operator re-arms it with `wavestack plc rearm`"
+    if status.estop:
+        return "in emergency stop"
+    if status.busy:
+        return "busy with a command"
+    if not status.ready:
+        return f"not ready (status word {status.raw_word})"
+    return None
+
+
+def echo_lag_error(device: str, beat: int, status: PlcStatus, max_lag: int, register: int) -> HeartbeatEchoStale | None:
+    """The error for a heartbeat echo trailing the host's heartbeat ``beat`` by more than ``max_lag``, or None.
+
+    Parameters
+    ----------
+    device
+        How errors name the PLC.
+    beat
+        The host's last heartbeat value (0..65535; the lag is counted modulo 2**16).
+    status
+        The status read (a tripped watchdog reports no echo: no error here, the trip is reported).
+    max_lag
+        Beats the echo may trail.
+    register
+        The echo's register, for the message.
+    """
+    lag = (beat - (status.heartbeat_echo or 0)) & 0xFFFF
+    if status.watchdog_tripped or lag <= max_lag:
+        return None
+    return HeartbeatEchoStale(device, f"heartbeat echo (register {register}) is {status.heartbeat_echo} while the "
+                              f"host sent {beat}: {lag} beats behind, expected at most {max_lag}; the PLC program "
+                              "is not scanning")
+
+
+def decode_self_check(device: str, block: RegisterBlock, registers: Sequence[int], constant: float) -> float:
+    """The self-check constant decoded from ``registers`` with the block's word order.
+
+    Raises
+    ------
+    ProtocolError
+        It decodes to something other than float32(``constant``); the message names the configured
+        word order and the order that would decode it.
+    """
+    assert block.word_order is not None
+    value = decode_float32(registers, block.word_order)
+    expected = round_to_float32(constant)
+    if value != expected:
+        matching = [o for o in WORD_ORDERS if decode_float32(registers, o) == expected]
+        hint = (f"it decodes correctly with word order {matching[0]}" if matching else
+                "no byte order decodes it: check the register address and the constant")
+        raise ProtocolError(device, f"start-up self-check failed: registers {block.start}-{block.stop - 1} = "
+                            f"{list(registers)} decode to {value!r} with the configured word order "
+                            f"{block.word_order}, expected {expected!r}; {hint}. Commands are refused until the "
+                            "self-check passes.")
+    return value
