@@ -18,7 +18,8 @@ space a removal may have either sign: removing ``-Z_j`` is a removal map shaped 
 plus piston, which a real tool can produce.
 
 A command takes effect once per ``command_id``; applying an id again returns the stored
-:class:`PolishingPass` and leaves the surface alone (the PLC handshake retries rely on it).
+:class:`PolishingPass` and leaves the surface alone (the PLC handshake retries rely on it). Only the
+newest :data:`REMEMBERED_COMMANDS` ids are remembered, so memory stays bounded in a long run.
 
 References
 ----------
@@ -34,6 +35,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +49,9 @@ _log = logging.getLogger(__name__)
 
 MAX_COMMAND_ID = 2**32 - 1  # command ids travel as a uint32 (two Modbus registers)
 MAX_PASSES = 100
+#: Commands remembered for "once per id" (the newest; a long run must not grow without bound, and
+#: ids wrap: the PLC's 16-bit id comes back after 65535 commands and must polish again).
+REMEMBERED_COMMANDS = 1024
 
 
 @dataclass(frozen=True)
@@ -178,7 +183,7 @@ class PolishingStation:
         self._surface = surface
         self._rng = np.random.default_rng(seed)
         self._lock = threading.Lock()
-        self._done: dict[int, tuple[RemovalCommand, PolishingPass]] = {}
+        self._done: OrderedDict[int, tuple[RemovalCommand, PolishingPass]] = OrderedDict()
         self._last_command_id: int | None = None
         self._passes_applied = 0
 
@@ -290,6 +295,9 @@ class PolishingStation:
                 removed_nm=read_only_copy(before - after),
             )
             self._done[command_id] = (command, result)
+            self._done.move_to_end(command_id)
+            while len(self._done) > REMEMBERED_COMMANDS:
+                self._done.popitem(last=False)
             self._surface = after
             self._last_command_id = command_id
             self._passes_applied += int(command.passes)

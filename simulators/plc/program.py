@@ -23,6 +23,7 @@ from __future__ import annotations
 import logging
 import struct
 import threading
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +35,10 @@ from wavestack.simulators.plc.faults import SimFaults
 from wavestack.simulators.plc.polishing import PolishingStation, RemovalCommand
 from wavestack.simulators.plc.watchdog import HeartbeatWatchdog, WatchdogState
 
-__all__ = ["PlcSimLayout", "PolishingPlcProgram", "SimOutputs", "float_to_words", "words_to_float"]
+__all__ = ["HISTORY_LENGTH", "PlcSimLayout", "PolishingPlcProgram", "SimOutputs", "float_to_words", "words_to_float"]
+
+#: Accepted commands the program remembers for tests (the newest; a long run must not grow without bound).
+HISTORY_LENGTH = 10_000
 
 _log = logging.getLogger(__name__)
 
@@ -189,8 +193,9 @@ class PolishingPlcProgram:
         self._fault_latched = False
         self._busy_until = 0.0
         self._outputs = self._zero_outputs()
-        self._accepted: list[int] = []
-        self._accepted_removals: list[tuple[float, ...]] = []
+        self._accepted: deque[int] = deque(maxlen=HISTORY_LENGTH)
+        self._accepted_removals: deque[tuple[float, ...]] = deque(maxlen=HISTORY_LENGTH)
+        self._accepted_count = 0
 
     # ----------------------------------------------------------------------------- ground truth
     def watchdog_state(self, now: float) -> WatchdogState:
@@ -219,15 +224,21 @@ class PolishingPlcProgram:
 
     @property
     def accepted_commands(self) -> list[int]:
-        """Ids of every command that took effect, in order."""
+        """Ids of the commands that took effect, in order (the last :data:`HISTORY_LENGTH`)."""
         with self._lock:
             return list(self._accepted)
 
     @property
     def accepted_removals(self) -> list[tuple[float, ...]]:
-        """The removal (nm per term) of every command that took effect, in order (ground truth)."""
+        """The removal (nm per term) of the commands that took effect, in order (the last :data:`HISTORY_LENGTH`)."""
         with self._lock:
             return list(self._accepted_removals)
+
+    @property
+    def accepted_count(self) -> int:
+        """Commands that took effect since start (all of them, not only the remembered ones)."""
+        with self._lock:
+            return self._accepted_count
 
     @property
     def heartbeat_value(self) -> int:
@@ -322,6 +333,7 @@ class PolishingPlcProgram:
         self._last_accepted = command_id
         self._accepted.append(command_id)
         self._accepted_removals.append(tuple(removal))
+        self._accepted_count += 1
         self._fault_latched = False
         self._busy_until = now + passes * self.layout.pass_duration_s
         self._outputs = SimOutputs(True, command_id, np.asarray(removal, dtype=np.float64))

@@ -39,7 +39,7 @@ from pymodbus.simulator import SimDevice
 from wavestack.simulators.plc.access import check_request, refusing_request_classes
 from wavestack.simulators.plc.faults import SimFaults
 from wavestack.simulators.plc.polishing import PolishingStation
-from wavestack.simulators.plc.program import PlcSimLayout, PolishingPlcProgram, SimOutputs
+from wavestack.simulators.plc.program import HISTORY_LENGTH, PlcSimLayout, PolishingPlcProgram, SimOutputs
 from wavestack.simulators.plc.watchdog import WatchdogState
 
 __all__ = ["PlcSimulator", "RequestRecord"]
@@ -93,7 +93,7 @@ class PlcSimulator:
         self._port = port
         self._clock = clock
         self._lock = threading.Lock()
-        self._requests: deque[RequestRecord] = deque(maxlen=10_000)
+        self._requests: deque[RequestRecord] = deque(maxlen=HISTORY_LENGTH)  # bounded: a soak must not grow
         self._request_count = 0
         self._connections = 0
         self._thread: threading.Thread | None = None
@@ -198,7 +198,7 @@ class PlcSimulator:
 
     @property
     def accepted_commands(self) -> list[int]:
-        """Ids of every command that took effect, in order."""
+        """Ids of the commands that took effect, in order (the last ``HISTORY_LENGTH``, see :mod:`.program`)."""
         return self.program.accepted_commands
 
     @property
@@ -208,7 +208,7 @@ class PlcSimulator:
 
     @property
     def requests(self) -> list[RequestRecord]:
-        """The requests decoded so far (last 10000)."""
+        """The requests decoded so far (the last ``HISTORY_LENGTH`` = 10000; :attr:`request_count` counts all)."""
         with self._lock:
             return list(self._requests)
 

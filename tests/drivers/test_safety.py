@@ -343,3 +343,37 @@ def test_scalar_limits_broadcast() -> None:
     assert limits.n_channels == 2
     np.testing.assert_array_equal(limits.max_step, [2.0, 2.0])
     np.testing.assert_array_equal(SafetyStage(limits).last_output, [0.0, 0.0])
+
+
+# ------------------------------------------------------------------ propose / commit (issue 13)
+def test_a_proposal_that_is_never_committed_does_not_move_the_base_of_the_rate_limit() -> None:
+    """The PLC refused 50 nm (e-stop): the next proposal still counts from 0, not from 50."""
+    stage = SafetyStage(SafetyLimits(lower=-200.0, upper=200.0, max_step=50.0, max_age_s=1.0))
+    first = stage.propose([150.0], measured_at_s=0.0, now_s=0.1)
+    assert first.values.tolist() == [50.0] and SafetyStatus.RATE_LIMITED in first.status
+    np.testing.assert_array_equal(stage.last_output, [0.0])  # refused: nothing committed
+    again = stage.propose([150.0], measured_at_s=0.2, now_s=0.3)
+    assert again.values.tolist() == [50.0]  # not 100: the machine still holds 0
+    stage.commit(again.values)  # acknowledged
+    assert stage.propose([150.0], measured_at_s=0.4, now_s=0.5).values.tolist() == [100.0]
+
+
+@given(st.lists(st.tuples(st.floats(min_value=-500.0, max_value=500.0), st.booleans()), min_size=1, max_size=40))
+@settings(max_examples=200, deadline=None)
+def test_every_committed_step_is_within_max_step_whatever_was_refused(steps: list[tuple[float, bool]]) -> None:
+    stage = SafetyStage(SafetyLimits(lower=-200.0, upper=200.0, max_step=50.0, max_age_s=1.0))
+    held = 0.0  # what the machine holds: only acknowledged proposals
+    for k, (request, acknowledged) in enumerate(steps):
+        out = stage.propose([request], measured_at_s=float(k), now_s=k + 0.1)
+        assert abs(out.values[0] - held) <= 50.0 and abs(out.values[0]) <= 200.0
+        if acknowledged:
+            stage.commit(out.values)
+            held = float(out.values[0])
+        assert stage.last_output.tolist() == [held]
+
+
+def test_commit_refuses_values_outside_the_limits_and_keeps_the_last_output() -> None:
+    stage = SafetyStage(_limits())
+    with pytest.raises(ValueError, match="within \\[lower, upper\\]"):
+        stage.commit([0.0, 151.0, 0.0])
+    np.testing.assert_array_equal(stage.last_output, [0.0, 75.0, 0.5])
