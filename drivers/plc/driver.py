@@ -13,15 +13,12 @@ pymodbus ``ModbusTcpClient``) and adds what a closed loop needs from a PLC link:
   while it cannot be); an unknown held command is read back from the output block;
 - command limits (:class:`CommandLimits`: ``|removal|`` and the step from the held command), checked
   before the wire (:class:`CommandRefused`); :meth:`PolishingLink.restrict` only tightens them;
-- a start-up self-check of the float32 byte order that fails closed;
-- a write allow-list (:meth:`RegisterMap.check_write`) enforced before anything reaches the wire;
-- typed errors from :mod:`wavestack.drivers.errors`, each naming the unit id, register and function
-  code: :class:`DeviceTimeout` (no reply), :class:`DeviceDisconnected` (connection refused, reset or
-  closed), :class:`ProtocolError` (truncated or malformed reply) and its subclass
-  :class:`PlcRefused` (a Modbus exception reply);
-- after a timeout or a malformed reply the TCP connection is closed (no stale bytes can poison the
-  next reply); after any loss the link reconnects on the next call with capped exponential
-  back-off, and the first request on a new connection is the heartbeat.
+- a start-up self-check of the float32 byte order that fails closed, and a write allow-list
+  (:meth:`RegisterMap.check_write`) enforced before anything reaches the wire;
+- typed errors (:mod:`wavestack.drivers.errors`) naming unit, register and function code:
+  :class:`DeviceTimeout`, :class:`DeviceDisconnected`, :class:`ProtocolError`, :class:`PlcRefused`;
+- after a timeout or a malformed reply the connection is closed (no stale bytes); the link
+  reconnects on the next call with capped back-off, and the first request is the heartbeat.
 
 Every public call takes ``timeout_s`` and never blocks longer. The class is thread-safe (one lock
 around each call), so a station may run :meth:`heartbeat` from its own thread.
@@ -40,8 +37,9 @@ from numpy.typing import ArrayLike
 
 from wavestack.drivers.errors import DeviceTimeout, ProtocolError
 from wavestack.drivers.plc.commands import CommandLedger, CommandLimits, CommandRefused
-from wavestack.drivers.plc.gate import HeartbeatEchoStale, PlcNotReady, decode_self_check, echo_lag_error, not_ready
-from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, registers_fit
+from wavestack.drivers.plc.gate import (HeartbeatEchoStale, PlcNotReady, command_refusal, decode_self_check,
+                                       echo_lag_error, not_ready)
+from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused, registers_fit
 from wavestack.drivers.plc.status import (
     CommandAck,
     MachineOutputs,
@@ -130,10 +128,7 @@ class PolishingLink:
         return self._limits
 
     def restrict(self, limits: CommandLimits) -> CommandLimits:
-        """Tighten the command limits (each limit becomes the stricter of the old and ``limits``); returns them.
-
-        Limits can never be loosened on a link: whoever holds it commands within the tightest ever set.
-        """
+        """Tighten the command limits to the stricter of the old and ``limits`` (never loosened); returns them."""
         with self._lock:
             self._limits = limits.tightened(self._limits)
             return self._limits
@@ -144,13 +139,7 @@ class PolishingLink:
             return self._ledger.next_id()
 
     def connect(self, timeout_s: float) -> PlcStatus:
-        """Open the connection (retrying with back-off until ``timeout_s``), send a heartbeat, read status.
-
-        Raises
-        ------
-        DeviceDisconnected
-            No connection within ``timeout_s``.
-        """
+        """Open the connection (with back-off until ``timeout_s``, else DeviceDisconnected), beat, read status."""
         deadline = deadline_after(timeout_s)
         with self._lock:
             self._transport.reset_backoff()
@@ -255,11 +244,14 @@ class PolishingLink:
             if previous is not None and previous != registers:
                 raise ValueError(f"{self._device}: command id {command_id} was already sent with other "
                                  "parameters; the PLC would ignore it (use a new id)")
-            self._check_may_command()
+            refusal = command_refusal(self._device, monitor=self._monitor, self_check_passed=self._self_check_passed,
+                                      echo_stale=self._echo_stale)
+            if refusal is not None:
+                raise refusal
             self._transport.ensure_connected(deadline)
             if self._heartbeat_pending:
                 self._send_heartbeat(deadline)  # heartbeat resumes before any command
-            held = self._gate(command_id, values, deadline)
+            held = self._gate(command_id, deadline)
             if previous is None and command_id == self._ledger.plc_accepted:
                 raise ValueError(f"{self._device}: command id {command_id} is the PLC's last accepted id; it would "
                                  "ignore it (use next_command_id())")
@@ -284,14 +276,18 @@ class PolishingLink:
             self._transport.ensure_connected(deadline)
             return self._read_status(deadline)
 
-    def read_outputs(self, timeout_s: float) -> MachineOutputs:
-        """The machine outputs (read-only block the watchdog zeroes).
+    def held_removal(self, timeout_s: float) -> np.ndarray:
+        """What the machine holds (nm per term), after settling a command whose reply was lost.
 
-        Raises
-        ------
-        PlcRefused
-            Exception 4 while the watchdog is tripped (the PLC answers nothing but the re-arm).
+        Reads the status (a lost command the PLC accepted is then held) and, when the held command is
+        unknown, the output block. Raises a DeviceError when it cannot tell: then send nothing.
         """
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            return self._settle(self._read_status(deadline), deadline).copy()
+
+    def read_outputs(self, timeout_s: float) -> MachineOutputs:
+        """The machine outputs (read-only block the watchdog zeroes); PlcRefused (4) while tripped."""
         deadline = deadline_after(timeout_s)
         block = self._map.output
         with self._lock:
@@ -320,17 +316,17 @@ class PolishingLink:
             return self._transport.read(address, count, self._map.status.read_function, deadline)
 
     def write_registers(self, address: int, values: Sequence[int], timeout_s: float) -> None:
-        """Raw write, allowed only inside the heartbeat, re-arm or command block (commissioning).
+        """Raw write inside the heartbeat or re-arm register (commissioning); WriteRefused elsewhere, before the wire.
 
-        Raises
-        ------
-        WriteRefused
-            Outside the allow-list, refused before anything is sent.
+        The command block is refused too: a removal goes through :meth:`send_removal`, its gate and limits.
         """
         values = list(values)
         if not values or not registers_fit(values):
             raise ValueError(f"{self._device}: values must be 1..123 integers 0..65535, got {values!r}")
         block = self._map.check_write(address, len(values), self._write_function_for(address))
+        if block.name == "command":
+            raise WriteRefused(self._device, f"refusing a raw write to register {address}: the command block is "
+                               "written only by send_removal (the readiness gate and the command limits)")
         deadline = deadline_after(timeout_s)
         with self._lock:
             self._transport.ensure_connected(deadline)
@@ -356,22 +352,11 @@ class PolishingLink:
                 return block.write_function or 16
         return 16
 
-    def _check_may_command(self) -> None:
-        """Refuse at once (nothing on the wire) a command this link may not send at all."""
-        if self._monitor:
-            raise ProtocolError(self._device, "refusing to send a command: a monitor link sends none")
-        if not self._self_check_passed:
-            raise ProtocolError(self._device, "refusing to send a command: the start-up self-check has not "
-                                "passed (call self_check first)")
-        if self._echo_stale:
-            raise PlcNotReady(self._device, "refusing to send a command: the last heartbeat showed a stale echo "
-                              "(the PLC program is not scanning)")
-
     def _echo_lag_error(self, status: PlcStatus) -> HeartbeatEchoStale | None:
         return echo_lag_error(self._device, self._beat, status, self._timing.heartbeat_echo_max_lag,
                               self._map.status.start + 2)
 
-    def _gate(self, command_id: int, values: np.ndarray, deadline: float) -> np.ndarray:
+    def _gate(self, command_id: int, deadline: float) -> np.ndarray:
         """Read the status; refuse unless the PLC can take a command; settle the held command; return it."""
         status = self._read_status(deadline)
         stale = self._echo_lag_error(status)
@@ -381,6 +366,10 @@ class PolishingLink:
         why = not_ready(status)
         if why is not None:
             raise PlcNotReady(self._device, f"refusing command {command_id}: the PLC is {why}")
+        return self._settle(status, deadline)
+
+    def _settle(self, status: PlcStatus, deadline: float) -> np.ndarray:
+        """Settle an unresolved command from ``status``, read back an unknown held command; the held values."""
         settled = self._ledger.resolve(status.last_accepted_id)
         if settled is not None:
             _log.warning("%s: %s", self._device, settled)

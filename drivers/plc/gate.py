@@ -16,7 +16,7 @@ from wavestack.drivers.plc.codec import WORD_ORDERS, decode_float32, round_to_fl
 from wavestack.drivers.plc.register_map import RegisterBlock
 from wavestack.drivers.plc.status import PlcStatus
 
-__all__ = ["HeartbeatEchoStale", "PlcNotReady", "decode_self_check", "echo_lag_error", "not_ready"]
+__all__ = ["HeartbeatEchoStale", "PlcNotReady", "command_refusal", "decode_self_check", "echo_lag_error", "not_ready"]
 
 
 class HeartbeatEchoStale(ProtocolError):
@@ -25,6 +25,23 @@ class HeartbeatEchoStale(ProtocolError):
 
 class PlcNotReady(DeviceError):
     """The PLC cannot take a command now (not scanning, tripped, e-stop, not ready or busy); nothing was sent."""
+
+
+def command_refusal(device: str, *, monitor: bool, self_check_passed: bool, echo_stale: bool) -> DeviceError | None:
+    """The error for a command the link may not send at all (nothing goes on the wire), or None.
+
+    A monitor link sends none; a link whose self-check has not passed sends none (fails closed); a
+    link whose last heartbeat showed a stale echo sends none until a heartbeat is echoed again.
+    """
+    if monitor:
+        return ProtocolError(device, "refusing to send a command: a monitor link sends none")
+    if not self_check_passed:
+        return ProtocolError(device, "refusing to send a command: the start-up self-check has not passed "
+                             "(call self_check first)")
+    if echo_stale:
+        return PlcNotReady(device, "refusing to send a command: the last heartbeat showed a stale echo (the PLC "
+                           "program is not scanning)")
+    return None
 
 
 def not_ready(status: PlcStatus) -> str | None:

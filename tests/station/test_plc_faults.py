@@ -55,7 +55,7 @@ class _Run:
 def _run(station, sim: PlcSimulator, switch_on: Callable[[], None], switch_off: Callable[[], None] | None,
          lasting: int) -> _Run:
     """Run the station; switch the fault on at ``FAULT_AT`` and off ``lasting`` results later; stop once
-    three commands were sent after it (or at ``MAX_RESULTS``)."""
+    two commands were sent after it (or at ``MAX_RESULTS``)."""
     run = _Run()
     stop = threading.Event()
 
@@ -72,7 +72,7 @@ def _run(station, sim: PlcSimulator, switch_on: Callable[[], None], switch_off: 
             run.fault_off, run.off_index = sim.request_count, result.index
         if run.off_index is not None:
             sent_after = sum(1 for r in run.results[run.off_index + 1:] if r.output is not None and r.output.sent)
-            if sent_after >= 3:
+            if sent_after >= 2:
                 stop.set()
 
     station.run(stop=stop, on_result=on_result, max_results=MAX_RESULTS)
@@ -99,7 +99,7 @@ def _check_wire_and_results(run: _Run, sim: PlcSimulator, config: StationConfig)
         assert result.output.sent or result.output.command.reason, result.output
     assert run.off_index is not None
     after = [r for r in run.results[run.off_index + 1:] if r.output.sent]
-    assert len(after) >= 3, [r.output.command.reason for r in run.results[run.off_index:]][:20]
+    assert len(after) >= 2, [r.output.command.reason for r in run.results[run.off_index:]][:20]
 
 
 @pytest.fixture
@@ -121,7 +121,7 @@ _GLITCHES: dict[str, tuple[Callable, Callable | None, int]] = {
     "dropped": (lambda sim: sim.faults.drop_replies(3), None, 6),
     "truncated": (lambda sim: sim.faults.truncate_replies(3, keep_bytes=9), None, 6),
     "corrupted": (lambda sim: sim.faults.corrupt_replies(3), None, 6),
-    "delayed": (lambda sim: setattr(sim.faults, "delay_s", 0.6), lambda sim: sim.faults.clear(), 3),
+    "delayed": (lambda sim: setattr(sim.faults, "delay_s", 0.6), lambda sim: sim.faults.clear(), 2),
     "restart": (lambda sim: sim.restart(downtime_s=1.0), None, 1),
 }
 
@@ -149,10 +149,10 @@ def test_no_command_reaches_an_estopped_plc_and_the_rate_limit_counts_from_what_
     station, devices = station_factory(config)
     sim = devices.plc_simulator
     run = _run(station, sim, lambda: setattr(sim.faults, "estop", True),
-               lambda: setattr(sim.faults, "estop", False), 6)
+               lambda: setattr(sim.faults, "estop", False), 4)
     _check_wire_and_results(run, sim, config)
     assert _command_writes(sim, config, run.fault_on, run.fault_off) == []
-    held = [r.output.command for r in run.results[FAULT_AT + 1:FAULT_AT + 6]]
+    held = [r.output.command for r in run.results[FAULT_AT + 1:FAULT_AT + 4]]
     assert all(not c.sent and "ESTOP" in c.status and "emergency stop" in c.reason for c in held), held
     assert thread_errors == []
 

@@ -130,6 +130,7 @@ class PlcOutput:
         self._lock = threading.RLock()
         self._state = OutputState()
         self._fault_detail: str | None = None
+        self._unsettled = False  # a send failed: the stage must learn what the machine holds first
         self._hold_logged = False
         link.restrict(CommandLimits(settings.max_removal_nm, settings.max_step_nm))
         self.stage = SafetyStage(SafetyLimits(
@@ -254,7 +255,8 @@ class PlcOutput:
             ``sent``, ``command_id`` (or None), ``status`` (the safety flags, e.g.
             ``"CLIPPED|RATE_LIMITED"`` or ``"STALE|HELD"``; ``"...|HELD|NOT_ARMED"`` before arming;
             ``"HELD|TRIPPED"`` and the like in a fault mode; ``"...|NOT_SENT"`` when the PLC did not
-            take it), ``reason`` and ``values_nm`` (what the machine holds unless sent).
+            take it; ``"HELD|UNRESOLVED"`` while the outcome of a failed send cannot be told),
+            ``reason`` and ``values_nm`` (what the machine holds unless sent).
         """
         with self._lock:
             mode = self._state.mode
@@ -266,6 +268,9 @@ class PlcOutput:
                 detail = f" ({self._fault_detail})" if self._fault_detail else ""
                 return SentCommand(sent=False, command_id=None, status=f"HELD|{mode.name}",
                                    reason=hold_reason(mode) + detail, values_nm=_values(self.stage.last_output))
+            unresolved = self._settle()
+            if unresolved is not None:
+                return unresolved
             safe = self.stage.propose(self.requested_removal_nm(coefficients_waves), valid=valid,
                                       measured_at_s=measured_at_s, now_s=now_s, reason=reason)
             if not safe.forwarded or not self._settings.enabled:
@@ -282,6 +287,7 @@ class PlcOutput:
             except (DeviceError, ValueError) as error:
                 why = f"output not armed: reading back the machine's outputs failed: {error}"
             else:
+                self._unsettled = False  # the stage starts from the machine's read-back
                 self._observe(PlcEvent.ARMING_RESULT)
                 logger.info("PLC output armed by a valid fresh result (the machine holds %s nm)",
                             self.stage.last_output.tolist())
@@ -291,6 +297,20 @@ class PlcOutput:
         self._hold_logged = True
         return SentCommand(sent=False, command_id=None, status=status, reason=why,
                            values_nm=_values(self.stage.last_output))
+
+    def _settle(self) -> SentCommand | None:
+        """After a failed send: reset the stage to what the machine holds (the link settles a lost command
+        from the PLC's last accepted id); if that cannot be told, the held record (nothing is sent)."""
+        if not self._unsettled:
+            return None
+        try:
+            self.stage.reset(self._link.held_removal(self._timeout_s))
+        except (DeviceError, ValueError) as error:
+            return SentCommand(sent=False, command_id=None, status="HELD|UNRESOLVED",
+                               reason=f"PLC: the last command's outcome is unknown, nothing is sent: {error}",
+                               values_nm=_values(self.stage.last_output))
+        self._unsettled = False
+        return None
 
     def _held(self, safe: SafeOutput) -> SentCommand:
         return SentCommand(sent=False, command_id=None, status=_flags(safe.status), reason=safe.reason,
@@ -303,6 +323,7 @@ class PlcOutput:
             self._link.send_removal(command_id, safe.values, self._settings.passes, self._timeout_s)
         except DeviceError as error:
             logger.warning("PLC command %d not taken: %s", command_id, error)
+            self._unsettled = True
             return SentCommand(sent=False, command_id=None, status=f"{_flags(safe.status)}|NOT_SENT",
                                reason=f"PLC: {error}", values_nm=_values(self.stage.last_output))
         self.stage.commit(safe.values)

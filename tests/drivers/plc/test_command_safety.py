@@ -174,3 +174,15 @@ def test_ids_count_on_from_the_plcs_last_accepted_id() -> None:
             assert later.next_command_id() == 3
             _send(later, 1.0)
         assert sim.accepted_commands == [1, 2, 3]
+
+
+def test_a_raw_write_cannot_reach_the_command_block() -> None:
+    """The commissioning write skips no gate: the command block is written only by send_removal."""
+    from wavestack.drivers.plc import WriteRefused
+
+    with plc() as (sim, link):
+        ready(link)
+        link.restrict(LIMITS)
+        with pytest.raises(WriteRefused, match="only by send_removal"):
+            link.write_registers(100, [9, 1] + [0] * (2 * N_TERMS), timeout_s=1.0)
+        assert _commands(sim) == []
