@@ -31,7 +31,7 @@ MAX_RESULTS = 600  # a bound, never reached on a sane machine: each run stops on
 
 def _config(watchdog_timeout_s: float = 5.0) -> StationConfig:
     config = load_station_config(SMALL)
-    config = replace(config, processing=replace(config.processing, method="carrier"),
+    config = replace(config, processing=replace(config.processing, method="carrier", fit_method="qr"),
                      optic=replace(config.optic, carrier_cycles=(30.0, 18.0)))
     outputs = replace(config.outputs, max_removal_nm=MAX_REMOVAL_NM, max_step_nm=MAX_STEP_NM, gain=1.0)
     # a generous result age: this suite is about the PLC; a loaded machine's old results are rightly held
