@@ -97,3 +97,11 @@ def test_after_a_trip_nothing_is_sent_until_an_operator_rearms_then_the_stage_re
         sent = _publish(output, 1.0)
         assert sent.sent and sent.values_nm[0] == 50.0  # from the 0 the watchdog left, not from 100
         assert _accepted(sim) == [50.0, 100.0, 50.0]
+
+
+def test_the_record_of_a_held_result_carries_the_output_state() -> None:
+    with _output() as (sim, output):
+        sim.faults.estop = True
+        heartbeat = output.heartbeat()
+        assert heartbeat.to_json() == {"heartbeat": True, "watchdog_tripped": False, "ready": False, "estop": True,
+                                       "plc_state": "ESTOP"}
