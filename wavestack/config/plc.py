@@ -228,6 +228,11 @@ def _check_consistency(config: PlcConfig) -> None:
     if link.reconnect_initial_s > link.reconnect_max_s:
         raise ConfigError(f"{where} reconnect_initial_s ({link.reconnect_initial_s}) must not exceed "
                           f"reconnect_max_s ({link.reconnect_max_s})")
+    longest_command_s = link.io_timeout_s * (1 + link.command_retries)
+    if not longest_command_s < link.watchdog_timeout_s:
+        raise ConfigError(f"{where} io_timeout_s ({link.io_timeout_s:g}) x (1 + command_retries {link.command_retries}) "
+                          f"= {longest_command_s:g} s: expected less than watchdog_timeout_s "
+                          f"({link.watchdog_timeout_s:g}), or one retried command starves the watchdog")
     if link.simulated and config.simulator is None:
         raise ConfigError(f"{where} url: sim://plc needs a [plc.simulator] table (the simulated machine)")
     if config.simulator is not None:

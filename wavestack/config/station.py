@@ -47,6 +47,7 @@ from wavestack.simulators.optic import OpticSettings
 from wavestack.simulators.spots import LensletArraySettings
 from wavestack.config.processing import ProcessingSettings
 from wavestack.config.shack_hartmann import ShackHartmannSettings
+from wavestack.config.station_rules import check_station_rules
 
 _TABLES = ("station", "processing", "camera", "pzt", "plc", "outputs", "optic", "bench", "shack_hartmann",
            "lenslets")
@@ -127,7 +128,9 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         Malformed TOML, an unknown top-level table, or any key error of any table; also a
         ``psi`` station without ``[pzt]``, or a simulated camera without ``[optic]``; a
         Shack-Hartmann station without ``[shack_hartmann]`` (or, simulated, ``[lenslets]``) or
-        with an interferometer's table, and the reverse.
+        with an interferometer's table, and the reverse; phase steps the algorithm cannot use
+        (:meth:`ProcessingSettings.check`) and the rules across tables of
+        :mod:`wavestack.config.station_rules`.
     """
     try:
         document = tomllib.loads(text)
@@ -144,6 +147,7 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         raise ConfigError(f"{source}: [{misplaced[0]}] belongs to a Shack-Hartmann station; "
                           "expected [station] kind = 'shack-hartmann' with it")
     processing = _section(ProcessingSettings, document, "processing", source)
+    processing.check(source=source)
     camera, camera_simulator = parse_camera_config(document, source=source)
     pzt = pzt_simulator = None
     if "pzt" in document:
@@ -156,13 +160,15 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         if "optic" not in document:
             raise ConfigError(f"{source}: [camera] url = 'sim://u3v' needs an [optic] table (the simulated optic)")
         optic = _section(OpticSettings, document, "optic", source)
-    return StationConfig(
+    config = StationConfig(
         source=source, text=text, station=station,
         processing=processing, camera=camera, camera_simulator=camera_simulator,
         pzt=pzt, pzt_simulator=pzt_simulator, plc=plc,
         outputs=_section(OutputSettings, document, "outputs", source),
         optic=optic, bench=_section(PiezoCoupling, document, "bench", source),
     )
+    check_station_rules(config)
+    return config
 
 
 def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings, *, text: str,
@@ -190,7 +196,7 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
                               f"[{missing[0]}] (the simulated optic and lenslet array)")
         optic = _section(OpticSettings, document, "optic", source)
         lenslets = _simulated_lenslets(document["lenslets"], sensor, station, camera_simulator, source)
-    return StationConfig(
+    config = StationConfig(
         source=source, text=text, station=station,
         processing=ProcessingSettings(method="carrier", modes=sensor.modes, ordering=sensor.ordering, remove="none"),
         camera=camera, camera_simulator=camera_simulator, pzt=None, pzt_simulator=None,
@@ -198,6 +204,8 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
         outputs=_section(OutputSettings, document, "outputs", source),
         optic=optic, bench=PiezoCoupling(), shack_hartmann=sensor, lenslets=lenslets,
     )
+    check_station_rules(config)
+    return config
 
 
 def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: StationSettings,
