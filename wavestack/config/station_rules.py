@@ -18,13 +18,9 @@ tables and keys involved, their values and what was expected:
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
 from wavestack.config._checks import BIT_DEPTH
 from wavestack.config.schema import ConfigError
-
-if TYPE_CHECKING:
-    from wavestack.config.station import StationConfig
+from wavestack.config.station_schema import StationConfig
 
 __all__ = ["check_station_rules"]
 
