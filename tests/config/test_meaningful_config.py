@@ -157,3 +157,26 @@ def test_every_shipped_device_file_still_validates() -> None:
     station_files = {p.name for p in STATION_FILES}
     assert {p.name for p in (ROOT / "config").glob("*.toml")} - station_files == {
         "plc-sim.toml", "plc-example.toml", "pzt-sim.toml", "pzt-mdt693b.example.toml"}, "a new example needs a test"
+
+
+def test_a_free_running_camera_slower_than_the_timeouts_is_refused() -> None:
+    text = with_keys(DEFAULT_TEXT, "processing", method='"carrier"')
+    text = with_keys(text, "camera.simulator", frame_rate_hz="0.1")
+    assert re.search(r"\[camera\] timeout_s = 2 s: expected more than the frame period 10 s of \[camera.simulator\] "
+                     r"frame_rate_hz 0.1", refused(text))
+    # a phase-stepping camera is triggered, not free running
+    assert parse_station_config(with_keys(DEFAULT_TEXT, "camera.simulator", frame_rate_hz="0.1"), source=SOURCE)
+
+
+def test_rings_beyond_the_memory_bound_are_refused() -> None:
+    text = with_keys(DEFAULT_TEXT, "camera.simulator", width="8192", height="8192")
+    text = with_keys(text, "camera", ring_capacity="64")
+    assert re.search(r"\[camera\] ring_capacity 64 \+ \[station\] set_ring_capacity 2 x 5 frames of \[camera.simulator\] "
+                     r"8192 x 8192 Mono12 hold 9.25 GiB; expected at most 2 GiB", refused(text))
+
+
+def test_a_lenslet_grid_larger_than_the_simulated_frame_is_refused() -> None:
+    text = with_keys((ROOT / "config" / "shack-hartmann.toml").read_text(encoding="utf-8"), "camera.simulator",
+                     width="640")
+    assert re.search(r"\[shack_hartmann\] pitch_px, offset_px, grid_shape: grid .* expected them inside the frame of "
+                     r"shape \(1024, 640\) \(\[camera.simulator\] width 640, height 1024\)", refused(text))

@@ -11,6 +11,11 @@ tables and keys involved, their values and what was expected:
   ``radians_per_volt`` is nonzero;
 - a simulated camera's ``[camera] pixel_format`` (when set) is ``[camera.simulator]
   pixel_format``, whose bit depth is ``[optic] bit_depth``;
+- a free-running simulated camera delivers a frame within both timeouts: ``[camera] timeout_s``
+  and ``[station] frame_timeout_s`` exceed ``1 / frame_rate_hz``;
+- the frames a simulated camera's rings hold, ``(ring_capacity + set_ring_capacity x frames per
+  set) x width x height x bytes per pixel``, fit in :data:`MAX_RING_BYTES`;
+- a simulated Shack-Hartmann camera's frame holds every ``[shack_hartmann]`` lenslet window;
 - ``[outputs]``: ``max_step_nm <= max_removal_nm``; ``first_term`` is at most the modes measured
   and the PLC command block's terms; a simulated PLC accepts ``max_removal_nm``.
 """
@@ -18,11 +23,15 @@ tables and keys involved, their values and what was expected:
 from __future__ import annotations
 
 import math
+from typing import Final
 from wavestack.config._checks import BIT_DEPTH
 from wavestack.config.schema import ConfigError
 from wavestack.config.station_schema import StationConfig
 
-__all__ = ["check_station_rules"]
+__all__ = ["MAX_RING_BYTES", "check_station_rules"]
+
+#: Most memory the frame rings of a simulated camera may hold, bytes (2 GiB).
+MAX_RING_BYTES: Final = 2 << 30
 
 
 def check_station_rules(config: StationConfig) -> None:
@@ -34,6 +43,7 @@ def check_station_rules(config: StationConfig) -> None:
             _check_bench(config)
     if config.camera.simulated:
         _check_pixel_format(config)
+        _check_simulated_frames(config)
     _check_outputs(config)
 
 
@@ -85,6 +95,31 @@ def _check_pixel_format(config: StationConfig) -> None:
     if config.optic is not None and config.optic.bit_depth != depth:
         raise ConfigError(f"{source}: [optic] bit_depth = {config.optic.bit_depth}: expected {depth}, the bit depth "
                           f"of [camera.simulator] pixel_format {simulator.pixel_format!r}")
+
+
+def _check_simulated_frames(config: StationConfig) -> None:
+    camera, simulator, source = config.camera, config.camera_simulator, config.source
+    period_s = 1.0 / simulator.frame_rate_hz
+    if not config.phase_stepping:  # free running: a frame every period
+        for key, timeout_s in (("[camera] timeout_s", camera.timeout_s),
+                               ("[station] frame_timeout_s", config.station.frame_timeout_s)):
+            if not timeout_s > period_s:
+                raise ConfigError(f"{source}: {key} = {timeout_s:g} s: expected more than the frame period "
+                                  f"{period_s:g} s of [camera.simulator] frame_rate_hz {simulator.frame_rate_hz:g}")
+    frames = camera.ring_capacity + config.station.set_ring_capacity * config.processing.frames_per_set
+    frame_bytes = simulator.width * simulator.height * (1 if BIT_DEPTH[simulator.pixel_format] <= 8 else 2)
+    if frames * frame_bytes > MAX_RING_BYTES:
+        raise ConfigError(
+            f"{source}: [camera] ring_capacity {camera.ring_capacity} + [station] set_ring_capacity "
+            f"{config.station.set_ring_capacity} x {config.processing.frames_per_set} frames of [camera.simulator] "
+            f"{simulator.width} x {simulator.height} {simulator.pixel_format} hold {frames * frame_bytes / 2**30:.3g} GiB; "
+            f"expected at most {MAX_RING_BYTES / 2**30:g} GiB")
+    if config.shack_hartmann is not None:
+        try:
+            config.shack_hartmann.grid_for((simulator.height, simulator.width))
+        except ValueError as error:
+            raise ConfigError(f"{source}: [shack_hartmann] pitch_px, offset_px, grid_shape: {error} "
+                              f"([camera.simulator] width {simulator.width}, height {simulator.height})") from None
 
 
 def _check_outputs(config: StationConfig) -> None:
