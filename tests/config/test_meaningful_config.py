@@ -106,6 +106,10 @@ REFUSED = [
     ("outputs", {"max_removal_nm": "600.0"},
      r"\[outputs\] max_removal_nm = 600: expected <= the simulated machine's \[plc.simulator.polishing\] max_removal_nm"),
     ("plc", {"command_block": "[100, 20]", "output_block": "[200, 20]"}, r"initial_surface_nm: expected 9 terms"),
+    # a self-check constant that cannot tell the word order, or cannot be sent
+    ("plc", {"self_check_value": "0.0"},
+     r"\[plc\] self_check_value = 0.0: expected a nonzero constant whose four byte orders differ"),
+    ("plc", {"self_check_value": "1e300"}, r"\[plc\] self_check_value = 1e\+300: expected a float32"),
     # the PLC's watchdog outlives one retried command
     ("plc", {"io_timeout_s": "1.0"},
      r"\[plc\] io_timeout_s \(1\) x \(1 \+ command_retries 2\) = 3 s: expected less than watchdog_timeout_s \(2\)"),
