@@ -19,6 +19,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
+import pytest
 from fuzz import fuzz_settings
 from hypothesis import given
 from hypothesis import strategies as st
@@ -180,3 +181,48 @@ def test_any_station_file_parses_or_fails_with_one_line_naming_the_key(base: dic
         assert "\n" not in message and message.startswith(f"{SOURCE}: "), message
         mentioned = set().union(*(names(change) for change in changes))
         assert any(re.search(rf"\b{re.escape(name)}\b", message) for name in mentioned), (message, changes)
+
+
+def _numeric_kind(hint: Any) -> tuple[str, int | None] | None:
+    """("int", "int:CHOICE" or "float"; the fixed array length or None for a scalar), or None for a key with no number."""
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return _numeric_kind(next(a for a in args if a is not type(None)))
+    if origin is typing.Literal:  # an integer choice: its float twin (3.0 == 3) is no integer either
+        return (f"int:{args[0]}", None) if all(isinstance(a, int) and not isinstance(a, bool) for a in args) else None
+    if origin is tuple:
+        inner = _numeric_kind(args[0])
+        if inner is None or inner[1] is not None:
+            return None
+        return inner[0], (1 if args[-1] is Ellipsis else len(args))
+    return {int: ("int", None), float: ("float", None)}.get(hint)
+
+
+NUMERIC = [(path, key, kind) for path, key, hint, _ in FIELDS if (kind := _numeric_kind(hint)) is not None]
+SH_TABLES = {"shack_hartmann", "lenslets"}
+
+
+def _with(path: tuple[str, ...], key: str, value: Any) -> str:
+    base = BASES[1] if path[0] in SH_TABLES else BASES[0]
+    document = json.loads(json.dumps(base))
+    apply(document, ("set", path, key, value))
+    return toml_text(document)
+
+
+def test_every_numeric_key_is_known_to_this_test() -> None:
+    assert len(NUMERIC) > 80  # every number of every table, nested aperture included
+
+
+@pytest.mark.parametrize(("path", "key", "kind"), NUMERIC, ids=[".".join((*p, k)) for p, k, _ in NUMERIC])
+def test_a_boolean_nan_or_infinity_is_refused_wherever_a_number_is_meant(path: tuple[str, ...], key: str,
+                                                                         kind: tuple[str, int | None]) -> None:
+    number_type, length = kind
+    bad = [True, False] + ([math.nan, math.inf, -math.inf] if number_type == "float" else [1.5])
+    if number_type.startswith("int:"):
+        bad.append(float(number_type[len("int:"):]))
+    for value in bad:
+        text = _with(path, key, value if length is None else [value] * length)
+        with pytest.raises(ConfigError) as caught:
+            parse_station_config(text, source=SOURCE)
+        message = str(caught.value)
+        assert re.search(rf"\[{re.escape('.'.join(path))}\] {key}(\[0\])?: expected", message), (value, message)
