@@ -92,6 +92,8 @@ REFUSED = [
     # a set that can never arrive in time
     ("pzt", {"settle_s": "0.5"},
      r"\[station\] frame_timeout_s = 2 s: expected more than 5 steps x \[pzt\] settle_s 0.5 s = 2.5 s"),
+    ("pzt", {"settle_s": "0.3"},
+     r"\[station\] max_result_age_s = 1 s: expected more than \(5 - 1\) steps x \[pzt\] settle_s 0.3 s = 1.2 s"),
     # a simulated bench whose fringes never move
     ("bench", {"axis": '"y"'}, r"\[bench\] axis = 'y': expected \[pzt\] phase_axis 'x'"),
     ("bench", {"radians_per_volt": "0.0"}, r"\[bench\] radians_per_volt = 0: expected a nonzero coupling"),

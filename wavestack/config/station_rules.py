@@ -6,7 +6,9 @@ tables and keys involved, their values and what was expected:
 - the piezo voltage of every phase step, ``bias_v + volts_per_radian * step``, lies inside
   ``[software_min_v, software_max_v]`` and, for a simulated controller, below its ``vlimit_v``
   (a real controller's front-panel limit is read at open: the driver refuses beyond it);
-- a set of ``n`` steps fits the set timeout: ``frame_timeout_s > n * settle_s``;
+- a set of ``n`` steps fits the set timeout: ``frame_timeout_s > n * settle_s``; and, when
+  results go to a PLC, a result can be fresh: ``max_result_age_s > (n - 1) * settle_s`` (a
+  result's age runs from its first frame);
 - a simulated bench moves the fringes: ``[bench] axis`` is ``[pzt] phase_axis`` and
   ``radians_per_volt`` is nonzero;
 - a simulated camera's ``[camera] pixel_format`` (when set) is ``[camera.simulator]
@@ -73,6 +75,12 @@ def _check_set_timeout(config: StationConfig) -> None:
             f"{config.source}: [station] frame_timeout_s = {station.frame_timeout_s:g} s: expected more than "
             f"{frames} steps x [pzt] settle_s {pzt.settle_s:g} s = {frames * pzt.settle_s:g} s "
             "(every set would time out)")
+    span_s = (frames - 1) * pzt.settle_s
+    if config.plc is not None and config.outputs.enabled and not station.max_result_age_s > span_s:
+        raise ConfigError(
+            f"{config.source}: [station] max_result_age_s = {station.max_result_age_s:g} s: expected more than "
+            f"({frames} - 1) steps x [pzt] settle_s {pzt.settle_s:g} s = {span_s:g} s, the age of a result "
+            "when its last frame arrives (every result would be stale and none sent)")
 
 
 def _check_bench(config: StationConfig) -> None:
