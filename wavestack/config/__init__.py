@@ -9,6 +9,7 @@ this module is the simulated station ``wavestack run`` uses without ``--config``
 from __future__ import annotations
 
 from wavestack.config._checks import BIT_DEPTH
+from wavestack.config.device_path import DEVICE_PATH_RULE, check_device_path
 from wavestack.config.camera import CameraSettings, CameraSimulatorSettings, parse_camera_config
 from wavestack.config.plc import (
     PlcConfig,
@@ -48,7 +49,7 @@ from wavestack.config.station import (
 )
 
 __all__ = [
-    "BIT_DEPTH", "CameraSettings", "CameraSimulatorSettings", "ConfigError", "DEFAULT_CONFIG", "FitSettings",
+    "BIT_DEPTH", "CameraSettings", "DEVICE_PATH_RULE", "check_device_path", "CameraSimulatorSettings", "ConfigError", "DEFAULT_CONFIG", "FitSettings",
     "OutputSettings", "PiezoSettings", "PiezoSimulatorSettings", "PlcConfig", "PlcLinkSettings",
     "PlcSimulatorSettings", "PolishingModelSettings", "ProcessingSettings", "ShackHartmannSettings",
     "StationConfig", "StationSettings", "URL_KINDS", "build_calibration", "build_piezo", "build_simulated_device",

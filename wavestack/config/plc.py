@@ -14,6 +14,7 @@ simulator's own :class:`PlcSimLayout` and :class:`PolishingStation`.
 from __future__ import annotations
 
 import re
+import struct
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -228,6 +229,14 @@ def _check_consistency(config: PlcConfig) -> None:
     if link.reconnect_initial_s > link.reconnect_max_s:
         raise ConfigError(f"{where} reconnect_initial_s ({link.reconnect_initial_s}) must not exceed "
                           f"reconnect_max_s ({link.reconnect_max_s})")
+    problem = _self_check_problem(link.self_check_value)
+    if problem is not None:
+        raise ConfigError(f"{where} self_check_value = {link.self_check_value!r}: {problem}")
+    longest_command_s = link.io_timeout_s * (1 + link.command_retries)
+    if not longest_command_s < link.watchdog_timeout_s:
+        raise ConfigError(f"{where} io_timeout_s ({link.io_timeout_s:g}) x (1 + command_retries {link.command_retries}) "
+                          f"= {longest_command_s:g} s: expected less than watchdog_timeout_s "
+                          f"({link.watchdog_timeout_s:g}), or one retried command starves the watchdog")
     if link.simulated and config.simulator is None:
         raise ConfigError(f"{where} url: sim://plc needs a [plc.simulator] table (the simulated machine)")
     if config.simulator is not None:
@@ -236,3 +245,21 @@ def _check_consistency(config: PlcConfig) -> None:
             raise ConfigError(f"{config.source}: [plc.simulator.polishing] initial_surface_nm: expected "
                               f"{link.n_terms} terms (command_block count {link.command_block[1]} = 2 + 2 x terms), "
                               f"got {len(surface)}")
+
+
+_FLOAT32_MAX = 3.4028234663852886e38
+
+
+def _self_check_problem(value: float) -> str | None:
+    """Why ``value`` cannot serve as the self-check constant, or None.
+
+    The start-up self-check reads the constant back to prove the word order; it must be a
+    finite nonzero float32 whose four byte orders (ABCD, CDAB, BADC, DCBA) are four different
+    register pairs, or a PLC with cleared memory, or the wrong order, would pass.
+    """
+    if not abs(value) <= _FLOAT32_MAX:
+        return f"expected a float32 (|value| <= {_FLOAT32_MAX:.7g})"
+    a, b, c, d = struct.pack(">f", value)
+    if len({(a, b, c, d), (c, d, a, b), (b, a, d, c), (d, c, b, a)}) != 4 or value == 0.0:
+        return "expected a nonzero constant whose four byte orders differ (e.g. 12345.678), so the check can tell them"
+    return None

@@ -3,9 +3,20 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Final, Literal
 
-from wavestack.config.schema import setting
+import numpy as np
+
+from wavestack.config.schema import ConfigError, setting
+
+#: Steps each fixed-step algorithm assumes, degrees from the first (the station steps counter-clockwise).
+FIXED_STEPS_DEG: Final = {"four": (0.0, 90.0, 180.0, 270.0), "hariharan": (0.0, 90.0, 180.0, 270.0, 360.0)}
+#: Most frames in one phase-shifted set (each set is held in memory ``set_ring_capacity`` times).
+MAX_STEPS: Final = 32
+#: Largest accepted condition number of the least-squares design ``[1, cos d, -sin d]`` of the steps: the
+#: phase noise grows with it (four 90 degree steps: 1.41; 0/45/90 degrees: 12; 0/30/60 degrees: 29).
+MAX_STEP_CONDITION: Final = 20.0
+_STEP_TOLERANCE_DEG = 1e-6
 
 
 @dataclass(frozen=True)
@@ -46,6 +57,51 @@ class ProcessingSettings:
     def frames_per_set(self) -> int:
         return len(self.steps_deg) if self.method == "psi" else 1
 
+    def check(self, *, source: str) -> None:
+        """Refuse phase steps the algorithm cannot work with (``method = "psi"`` only).
+
+        Rules: 3 to :data:`MAX_STEPS` steps; ``four`` and ``hariharan`` take exactly their own
+        steps (:data:`FIXED_STEPS_DEG`, from any first step); ``lsq``, ``aia`` and ``pca`` need at
+        least three steps distinct modulo 360 degrees, spread over the cycle (condition number of
+        the least-squares design at most :data:`MAX_STEP_CONDITION`).
+
+        Raises
+        ------
+        ConfigError
+            One line naming ``source``, ``[processing] steps_deg``, the steps and the rule.
+        """
+        if self.method != "psi":
+            return
+        shown = ", ".join(f"{step:g}" for step in self.steps_deg[:8]) + (", ..." if len(self.steps_deg) > 8 else "")
+        where = f"{source}: [processing] steps_deg = [{shown}]"
+        reason = _step_problem(self.psi_algorithm, self.steps_deg)
+        if reason is not None:
+            raise ConfigError(f"{where}: {reason} (psi_algorithm = {self.psi_algorithm!r})")
+
     def fit_settings(self) -> FitSettings:
         return FitSettings(self.fit_method, self.modes, self.ordering, None if self.remove == "none" else self.remove,
                            self.mesh_vertices)
+
+
+def _step_problem(algorithm: str, steps_deg: tuple[float, ...]) -> str | None:
+    """Why ``steps_deg`` cannot work with ``algorithm``, or None."""
+    count = len(steps_deg)
+    fixed = FIXED_STEPS_DEG.get(algorithm)
+    if fixed is not None:
+        expected = [steps_deg[0] + step for step in fixed] if count else list(fixed)
+        if count != len(fixed) or not np.allclose(steps_deg, expected, rtol=0.0, atol=_STEP_TOLERANCE_DEG):
+            return f"expected {len(fixed)} steps {fixed[1] - fixed[0]:g} degrees apart, e.g. {list(fixed)}"
+        return None
+    if not 3 <= count <= MAX_STEPS:
+        return f"expected 3 to {MAX_STEPS} steps, got {count}"
+    wrapped = np.round(np.mod(steps_deg, 360.0), 6) % 360.0
+    if len(np.unique(wrapped)) < 3:
+        return "expected at least 3 steps distinct modulo 360 degrees"
+    radians = np.radians(steps_deg)
+    design = np.column_stack([np.ones(count), np.cos(radians), -np.sin(radians)])
+    singular = np.linalg.svd(design, compute_uv=False)
+    condition = singular[0] / singular[-1] if singular[-1] > 0 else np.inf
+    if not condition <= MAX_STEP_CONDITION:
+        return (f"expected steps spread over the cycle (least-squares condition number <= {MAX_STEP_CONDITION:g}, "
+                f"got {condition:.3g}), e.g. [0, 90, 180, 270]")
+    return None

@@ -37,7 +37,8 @@ class PiezoSettings:
     """``[pzt]``: the piezo controller the station drives and the phase-step calibration."""
 
     url: str = setting(url_kinds=("sim", "socket", "device"),
-                       doc="serial port: /dev/ttyUSB0, COM3, socket://host:port or sim://mdt693b")
+                       doc="serial port: /dev/ttyUSB0, /dev/serial/by-id/..., COM3, "
+                           "socket://host:port or sim://mdt693b")
     volts_per_radian: float = setting(minimum=-150.0, maximum=150.0,
                                       doc="phase-step calibration, V per radian (nonzero)")
     bias_v: float = setting(minimum=0.0, maximum=150.0, doc="voltage at zero phase step, V")

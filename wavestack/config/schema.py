@@ -22,13 +22,15 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
+from wavestack.config.device_path import check_device_path, is_device_path
 from wavestack.pipeline import InputError
 
 T = TypeVar("T")
 
 #: URL kinds a device field may allow. ``device`` is a local device path (``/dev/...``, ``COMn``).
 URL_KINDS = ("sim", "socket", "tcp", "usb", "device")
-_DEVICE_PATH = re.compile(r"^(/dev/\S+|COM\d+)$")
+#: Integers are TOML's: signed 64-bit.
+_INT64 = (-(2 ** 63), 2 ** 63 - 1)
 _SCHEME = re.compile(r"^([a-z][a-z0-9+.-]*)://")
 
 
@@ -71,8 +73,13 @@ def setting(
 
 
 def url_kind(url: str) -> str | None:
-    """The kind of a device URL (``sim``, ``socket``, ``tcp``, ``usb``, ``device``) or None."""
-    if _DEVICE_PATH.match(url):
+    """The kind of a device URL (``sim``, ``socket``, ``tcp``, ``usb``, ``device``) or None.
+
+    ``device`` only says the URL is written as a local path; whether that path is allowed is
+    :func:`~wavestack.config.device_path.check_device_path`'s decision (resolved, symlinks
+    followed), which :func:`parse_section` applies to every device field.
+    """
+    if is_device_path(url):
         return "device"
     match = _SCHEME.match(url)
     return match.group(1) if match else None
@@ -147,7 +154,10 @@ def parse_section(schema: type[T], table: Any, *, source: str, section: str) -> 
             continue
         values[name] = _check(table[name], hints[name], spec, f"{where} {name}", source,
                               f"{section}.{name}" if section else name)
-    return schema(**values)
+    try:
+        return schema(**values)
+    except (ValueError, TypeError) as error:  # the schema's own __post_init__ checks name the field
+        raise ConfigError(f"{where} {error}") from None
 
 
 def _doc_suffix(spec: dataclasses.Field[Any]) -> str:
@@ -158,6 +168,8 @@ def _doc_suffix(spec: dataclasses.Field[Any]) -> str:
 def _describe(value: Any) -> str:
     kind = {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
             list: "an array", dict: "a table"}.get(type(value), type(value).__name__)
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:
+        return f"{kind} of {value.bit_length()} bits"  # repr() of a huge integer may itself fail
     shown = repr(value)
     return f"{kind} {shown if len(shown) <= 40 else shown[:37] + '...'}"
 
@@ -179,6 +191,9 @@ def _check(value: Any, hint: Any, spec: dataclasses.Field[Any], where: str, sour
         if kind not in meta["url_kinds"]:
             raise ConfigError(f"{where}: URL {checked!r} is not allowed; expected "
                               + " or ".join(_url_kind_text(k) for k in meta["url_kinds"]))
+        reason = check_device_path(checked) if kind == "device" else None
+        if reason is not None:
+            raise ConfigError(f"{where}: device path {checked!r} is not allowed: {reason}")
     return checked
 
 
@@ -195,8 +210,10 @@ def _convert(value: Any, hint: Any, where: str, source: str, section: str) -> An
             raise TypeError(f"schema field {where}: only 'X | None' unions are supported")
         return _convert(value, options[0], where, source, section)
     if origin is typing.Literal:
-        if value not in args:
-            raise ConfigError(f"{where}: expected one of {', '.join(repr(a) for a in args)}, got {value!r}")
+        # the type must match too: TOML true is a Python bool, an int, and 1.0 == 1
+        if not any(type(value) is type(a) and value == a for a in args):
+            shown = repr(value) if isinstance(value, str) else _describe(value)
+            raise ConfigError(f"{where}: expected one of {', '.join(repr(a) for a in args)}, got {shown}")
         return value
     if origin is tuple:
         if not isinstance(value, list):
@@ -215,13 +232,19 @@ def _convert(value: Any, hint: Any, where: str, source: str, section: str) -> An
     if hint is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{where}: expected an integer, got {_describe(value)}")
+        if not _INT64[0] <= value <= _INT64[1]:
+            raise ConfigError(f"{where}: expected a 64-bit integer, got {_describe(value)}")
         return value
     if hint is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: expected a number, got {_describe(value)}")
-        if not math.isfinite(value):
-            raise ConfigError(f"{where}: expected a finite number, got {value!r}")
-        return float(value)
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond any float
+            number = math.inf
+        if not math.isfinite(number):
+            raise ConfigError(f"{where}: expected a finite number, got {_describe(value)}")
+        return number
     if hint is str:
         if not isinstance(value, str):
             raise ConfigError(f"{where}: expected a string, got {_describe(value)}")

@@ -21,7 +21,7 @@ class ShackHartmannSettings:
     pupil_radius_px: float = setting(minimum=1.0, maximum=1e5, doc="pupil radius on the camera, pixels")
     offset_px: tuple[float, float] = setting((0.0, 0.0), minimum=-0.5,
                                              doc="(col, row) of the top-left corner of lenslet (0, 0), pixels")
-    grid_shape: tuple[int, int] | None = setting(None, minimum=1,
+    grid_shape: tuple[int, int] | None = setting(None, minimum=1, maximum=2048,
                                                  doc="(rows, cols) of lenslets; absent: as many as fit")
     modes: int = setting(36, minimum=3, maximum=231, doc="Noll terms reconstructed, from piston")
     ordering: Literal["noll"] = "noll"

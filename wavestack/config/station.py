@@ -33,20 +33,21 @@ from __future__ import annotations
 import dataclasses
 import tomllib
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 from wavestack.config._checks import BIT_DEPTH
-from wavestack.config.camera import CameraSettings, CameraSimulatorSettings, parse_camera_config
-from wavestack.config.schema import ConfigError, load_toml, parse_section, setting
-from wavestack.config.plc import PlcConfig, parse_plc_config
-from wavestack.config.pzt import PiezoSettings, PiezoSimulatorSettings, parse_pzt_config
+from wavestack.config.camera import CameraSimulatorSettings, parse_camera_config
+from wavestack.config.schema import ConfigError, load_toml, parse_section
+from wavestack.config.plc import parse_plc_config
+from wavestack.config.pzt import parse_pzt_config
 from wavestack.simulators.bench import PiezoCoupling
 from wavestack.simulators.optic import OpticSettings
 from wavestack.simulators.spots import LensletArraySettings
 from wavestack.config.processing import ProcessingSettings
 from wavestack.config.shack_hartmann import ShackHartmannSettings
+from wavestack.config.station_rules import check_station_rules
+from wavestack.config.station_schema import OutputSettings, StationConfig, StationSettings
 
 _TABLES = ("station", "processing", "camera", "pzt", "plc", "outputs", "optic", "bench", "shack_hartmann",
            "lenslets")
@@ -54,64 +55,6 @@ _SHACK_HARTMANN_ONLY = ("shack_hartmann", "lenslets")
 _INTERFEROMETER_ONLY = ("processing", "pzt", "bench")
 #: The simulated station, shipped inside the package (the one default station file).
 DEFAULT_CONFIG = Path(__file__).resolve().parent / "default.toml"
-
-
-@dataclass(frozen=True)
-class StationSettings:
-    """``[station]``: the run as a whole."""
-
-    kind: Literal["interferometer", "shack-hartmann"] = setting(
-        "interferometer", doc="phase maps from fringes, or slopes from a lenslet array")
-    wavelength_nm: float = setting(632.8, minimum=100.0, maximum=20000.0, doc="test wavelength, nm")
-    frame_timeout_s: float = setting(2.0, minimum=0.01, maximum=60.0, doc="longest wait for a frame or set, s")
-    max_result_age_s: float = setting(1.0, minimum=0.01, maximum=60.0,
-                                      doc="an older result is stale and never forwarded, s")
-    reconnect_max_s: float = setting(5.0, minimum=0.01, maximum=600.0, doc="longest reconnect back-off, s")
-    set_ring_capacity: int = setting(2, minimum=1, maximum=64, doc="phase-shifted sets held for the pipeline")
-
-
-@dataclass(frozen=True)
-class OutputSettings:
-    """``[outputs]``: the removal command sent to the polishing PLC for each valid result.
-
-    The command per Zernike term is ``gain * surface_nm`` for terms from ``first_term`` on (piston
-    and tilts are alignment, not polishing), ``surface_nm = wavefront_waves * wavelength_nm *
-    surface_factor`` (0.5 for a surface seen in reflection, double pass). It then passes the safety
-    stage: clipped to +-``max_removal_nm``, changed by at most ``max_step_nm`` per update.
-    """
-
-    enabled: bool = setting(True, doc="send removal commands when a PLC is configured")
-    gain: float = setting(0.5, minimum=0.0, maximum=1.0, doc="fraction of the measured error commanded")
-    surface_factor: float = setting(0.5, minimum=0.01, maximum=10.0, doc="surface per wavefront")
-    first_term: int = setting(4, minimum=1, maximum=231, doc="first Noll term commanded (4 = defocus)")
-    max_removal_nm: float = setting(200.0, minimum=0.0, maximum=1e5, doc="drive limit per term, nm")
-    max_step_nm: float = setting(50.0, minimum=1e-6, maximum=1e5, doc="largest change per update, nm")
-    passes: int = setting(1, minimum=1, maximum=100)
-
-
-@dataclass(frozen=True, eq=False)
-class StationConfig:
-    """A checked station configuration (every table parsed) and its source text."""
-
-    source: str
-    text: str
-    station: StationSettings
-    processing: ProcessingSettings
-    camera: CameraSettings
-    camera_simulator: CameraSimulatorSettings
-    pzt: PiezoSettings | None
-    pzt_simulator: PiezoSimulatorSettings | None
-    plc: PlcConfig | None
-    outputs: OutputSettings
-    optic: OpticSettings | None
-    bench: PiezoCoupling
-    shack_hartmann: ShackHartmannSettings | None = None
-    lenslets: LensletArraySettings | None = None
-
-    @property
-    def phase_stepping(self) -> bool:
-        """True for an interferometer stepping a piezo (triggered camera, phase-shifted sets)."""
-        return self.station.kind == "interferometer" and self.processing.method == "psi"
 
 
 def _section(schema: type, document: Mapping[str, Any], name: str, source: str) -> Any:
@@ -127,7 +70,9 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         Malformed TOML, an unknown top-level table, or any key error of any table; also a
         ``psi`` station without ``[pzt]``, or a simulated camera without ``[optic]``; a
         Shack-Hartmann station without ``[shack_hartmann]`` (or, simulated, ``[lenslets]``) or
-        with an interferometer's table, and the reverse.
+        with an interferometer's table, and the reverse; phase steps the algorithm cannot use
+        (:meth:`ProcessingSettings.check`) and the rules across tables of
+        :mod:`wavestack.config.station_rules`.
     """
     try:
         document = tomllib.loads(text)
@@ -144,6 +89,7 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         raise ConfigError(f"{source}: [{misplaced[0]}] belongs to a Shack-Hartmann station; "
                           "expected [station] kind = 'shack-hartmann' with it")
     processing = _section(ProcessingSettings, document, "processing", source)
+    processing.check(source=source)
     camera, camera_simulator = parse_camera_config(document, source=source)
     pzt = pzt_simulator = None
     if "pzt" in document:
@@ -156,13 +102,15 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         if "optic" not in document:
             raise ConfigError(f"{source}: [camera] url = 'sim://u3v' needs an [optic] table (the simulated optic)")
         optic = _section(OpticSettings, document, "optic", source)
-    return StationConfig(
+    config = StationConfig(
         source=source, text=text, station=station,
         processing=processing, camera=camera, camera_simulator=camera_simulator,
         pzt=pzt, pzt_simulator=pzt_simulator, plc=plc,
         outputs=_section(OutputSettings, document, "outputs", source),
         optic=optic, bench=_section(PiezoCoupling, document, "bench", source),
     )
+    check_station_rules(config)
+    return config
 
 
 def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings, *, text: str,
@@ -190,7 +138,7 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
                               f"[{missing[0]}] (the simulated optic and lenslet array)")
         optic = _section(OpticSettings, document, "optic", source)
         lenslets = _simulated_lenslets(document["lenslets"], sensor, station, camera_simulator, source)
-    return StationConfig(
+    config = StationConfig(
         source=source, text=text, station=station,
         processing=ProcessingSettings(method="carrier", modes=sensor.modes, ordering=sensor.ordering, remove="none"),
         camera=camera, camera_simulator=camera_simulator, pzt=None, pzt_simulator=None,
@@ -198,6 +146,8 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
         outputs=_section(OutputSettings, document, "outputs", source),
         optic=optic, bench=PiezoCoupling(), shack_hartmann=sensor, lenslets=lenslets,
     )
+    check_station_rules(config)
+    return config
 
 
 def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: StationSettings,
