@@ -91,10 +91,14 @@ class PlcOutput:
         A result measured longer ago than this is stale and never forwarded.
     timeout_s : float
         Budget of each PLC exchange.
+    heartbeat_period_s : float
+        Longest gap between heartbeats while the loop waits on a device (see :meth:`keep_alive`).
     """
 
     def __init__(self, link: PolishingLink, settings: OutputSettings, n_terms: int, *, wavelength_nm: float,
-                 max_age_s: float, timeout_s: float) -> None:
+                 max_age_s: float, timeout_s: float, heartbeat_period_s: float = 0.5) -> None:
+        self._heartbeat_period_s = heartbeat_period_s
+        self._last_heartbeat_s = -float("inf")
         self._link = link
         self._settings = settings
         self._n_terms = n_terms
@@ -136,11 +140,21 @@ class PlcOutput:
                 logger.info("PLC watchdog tripped during start-up (before any command); re-arming it once")
                 self._link.rearm(self._timeout_s)
             self._heartbeat_started = True
+            self._last_heartbeat_s = time.monotonic()
             status = self._link.heartbeat(self._timeout_s)
         except DeviceError as error:
             logger.warning("PLC heartbeat failed: %s", error)
             return Heartbeat(False, error=str(error))
         return Heartbeat(True, watchdog_tripped=status.watchdog_tripped, ready=status.ready, estop=status.estop)
+
+    def keep_alive(self, now_s: float) -> Heartbeat | None:
+        """A heartbeat (never a command) when ``heartbeat_period_s`` has passed since the last one, else None.
+
+        ``now_s`` is ``time.monotonic()``.
+        """
+        if now_s - self._last_heartbeat_s < self._heartbeat_period_s:
+            return None
+        return self.heartbeat()
 
     def send(self, result: StationResult) -> OutputRecord:
         """The cycle's heartbeat, then the result through the safety stage to the PLC.
