@@ -92,9 +92,10 @@ class _SetInHand:
     (:class:`~wavestack.drivers.ring.FrameLost`) instead of after the whole timeout.
     """
 
-    def __init__(self, camera: U3VCamera, stop: threading.Event) -> None:
+    def __init__(self, camera: U3VCamera, stop: threading.Event, frame_timeout_s: float) -> None:
         self._camera = camera
         self._stop = stop
+        self._frame_timeout_s = frame_timeout_s
         self._loss_mark = camera.loss_mark()
         self.frames = 0
 
@@ -103,7 +104,8 @@ class _SetInHand:
         self._camera.trigger_software(timeout_s)
 
     def read_frame(self, timeout_s: float) -> Frame:
-        deadline = time.monotonic() + timeout_s
+        """The triggered frame, within the station's frame timeout (``timeout_s`` bounds device calls)."""
+        deadline = time.monotonic() + self._frame_timeout_s
         while True:
             if self._stop.is_set():
                 raise AcquisitionCancelled(f"{self._camera.name}: stopped while waiting for a triggered frame")
@@ -134,7 +136,10 @@ class PhaseStepSource:
         Phase steps of one set.
     calibration : PhaseStepCalibration
     settle_s, timeout_s : float
-        Wait after each step; timeout of each device call.
+        Wait after each step; timeout of each device call, s.
+    frame_timeout_s : float, optional
+        Longest wait for a triggered frame before the camera counts as failing, s (default
+        ``timeout_s``); the station passes its ``frame_timeout_s``.
     ring_capacity : int
         Sets held for the pipeline (newest-only).
 
@@ -148,7 +153,8 @@ class PhaseStepSource:
     """
 
     def __init__(self, camera: U3VCamera, piezo: MDT693B, *, axis: str, steps_rad: Sequence[float],
-                 calibration: PhaseStepCalibration, settle_s: float, timeout_s: float, ring_capacity: int) -> None:
+                 calibration: PhaseStepCalibration, settle_s: float, timeout_s: float, ring_capacity: int,
+                 frame_timeout_s: float | None = None) -> None:
         self._camera = camera
         self._piezo = piezo
         self._axis = axis
@@ -156,6 +162,7 @@ class PhaseStepSource:
         self._calibration = calibration
         self._settle_s = settle_s
         self._timeout_s = timeout_s
+        self._frame_timeout_s = timeout_s if frame_timeout_s is None else frame_timeout_s
         self._capacity = ring_capacity
         self._ring: FrameRing[tuple[Frame, ...]] = FrameRing(ring_capacity, RingPolicy.NEWEST_ONLY, name="phase sets")
         self._stop = threading.Event()
@@ -183,7 +190,7 @@ class PhaseStepSource:
         """The stepping thread: sets into the ring until stopped or a device fails; never raises."""
         lost_in_a_row = 0
         while not self._stop.is_set():
-            in_hand = _SetInHand(self._camera, self._stop)
+            in_hand = _SetInHand(self._camera, self._stop, self._frame_timeout_s)
             try:
                 frames = acquire_phase_steps(self._piezo, in_hand, self._axis, self._steps,
                                              calibration=self._calibration, settle_s=self._settle_s,

@@ -142,7 +142,8 @@ class Station:
         return PhaseStepSource(devices.camera, devices.piezo, axis=config.pzt.phase_axis,
                                steps_rad=phase_steps_rad(config), calibration=devices.calibration,
                                settle_s=config.pzt.settle_s, timeout_s=config.camera.timeout_s,
-                               ring_capacity=config.station.set_ring_capacity)
+                               ring_capacity=config.station.set_ring_capacity,
+                               frame_timeout_s=config.station.frame_timeout_s)
 
     def close(self) -> None:
         """Stop acquisition and the fitter worker; idempotent."""
