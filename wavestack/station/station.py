@@ -123,6 +123,7 @@ class Station:
         self._source: CarrierSource | PhaseStepSource | None = self._make_source()
         self._retired = Counters.zero(self._source.frames_per_set)  # sources of lost connections
         self._last_counters = self._retired  # the last snapshot that added up
+        self._not_back = DeviceDisconnected(devices.camera.name, "acquisition not started")  # while no source
         self._output: PlcOutput | None = None
         self._slice_s = _MAX_WAIT_SLICE_S
         if devices.link is not None and config.plc is not None:
@@ -197,7 +198,7 @@ class Station:
     def _read_set(self, stop: threading.Event) -> tuple[Frame, ...] | None:
         """The next set within ``frame_timeout_s``, awaited in slices with the PLC kept alive; None if stopped."""
         if self._source is None:
-            raise DeviceDisconnected(self._devices.camera.name, "camera not reconnected yet")
+            raise self._not_back
         timeout_s = self._config.station.frame_timeout_s
         deadline = time.monotonic() + timeout_s
         while not stop.is_set():
@@ -252,6 +253,7 @@ class Station:
             reconnect_devices(self._devices, self._config, force_camera=force_camera)
         except DeviceError as error:
             logger.warning("devices still unavailable: %s", error)
+            self._not_back = DeviceDisconnected(error.device, f"not back yet ({error.detail})")
             return
         self._keep_alive()
         self._source = self._make_source()
@@ -263,6 +265,7 @@ class Station:
             self._source.start()
         except DeviceError as error:  # the next read reports the missing source
             logger.warning("acquisition did not start: %s", error)
+            self._not_back = DeviceDisconnected(error.device, f"acquisition did not start ({error.detail})")
             self._retire_source()
 
     # ------------------------------------------------------------------ records
