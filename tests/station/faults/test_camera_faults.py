@@ -66,17 +66,12 @@ def test_a_damaged_block_costs_one_set_not_a_timeout(station_factory, check_coun
     station, devices = station_factory(fault_config(method))
     camera = devices.bench.camera
     value = {"corrupt_leader": "magic", "corrupt_trailer": "block_id", "partial_transfer": True}[fault]
-    dropped_before: list[int] = []
-
-    def inject() -> None:
-        dropped_before.append(station._counters()[0].frames.dropped)
-        setattr(camera.faults, fault, value)
-
-    run = run_fault(station, devices, inject=inject)
+    run = run_fault(station, devices, inject=lambda: setattr(camera.faults, fault, value))
     check_fault_run(run, check_counts, 5 if method == "psi" else 1, watchdog=False)  # one-shot: no window
     assert not _lost(run), [r.reason for r in _lost(run)]
     assert getattr(camera.faults, fault) in (None, False)  # the fault did happen
-    assert run.summary.counters.frames.dropped > dropped_before[0]
+    before = run.records[run.injected_at - 1].result.counters
+    assert run.summary.counters.frames.dropped > before.frames.dropped
 
 
 @pytest.mark.parametrize("method", ["psi", "carrier"])
