@@ -9,6 +9,10 @@ drops frames instead of building a backlog. Both count frames and sets separatel
 - :class:`PhaseStepSource` — a thread of its own steps the piezo, triggers the camera per step,
   tags each frame with the commanded and read-back voltage, and puts whole sets into a newest-only
   ring of sets; a device error ends the thread and is handed to the pipeline through the ring.
+  A block the camera discarded (damaged leader, trailer or payload) costs only the set it
+  belonged to (:class:`~wavestack.drivers.ring.FrameLost`, at once), up to
+  :data:`MAX_LOST_SETS_IN_A_ROW` sets in a row. A stop is seen within one 0.1 s wait slice, one
+  piezo exchange, or at once during a settle wait; the thread never raises.
 """
 
 from __future__ import annotations

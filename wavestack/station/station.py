@@ -182,7 +182,7 @@ class Station:
                 on_result(CycleRecord(result))
                 index += 1
                 tally.last_reason = result.reason
-                failures += 1
+                failures += error.device == self._devices.camera.name  # the camera's own, in a row
                 self._recover(stop, backoff_s, force_camera=failures > 2)
                 backoff_s = min(backoff_s * 2, self._config.station.reconnect_max_s)
                 continue
