@@ -34,6 +34,22 @@ T = TypeVar("T")
 logger = logging.getLogger(__name__)
 
 
+class WaitTimeout(DeviceTimeout):
+    """:meth:`FrameRing.get` waited its whole timeout and no frame came (the ring is open and empty).
+
+    A consumer that waits in slices tells it from a device's own timeout handed over by
+    :meth:`FrameRing.close` (which is a plain :class:`DeviceTimeout`).
+    """
+
+
+class FrameLost(DeviceError):
+    """A frame the consumer waits for will never come: the producer reported it lost (e.g. a damaged block).
+
+    Raised by :meth:`FrameRing.get` only to a caller that asked for it (``fail_after_loss``), so
+    a triggered acquisition learns at once that its frame is gone instead of waiting its timeout.
+    """
+
+
 class RingPolicy(enum.Enum):
     """Which frames a full or lagging ring gives up."""
 
@@ -94,6 +110,7 @@ class FrameRing(Generic[T]):
         self._last_frame_id: int | None = None
         self._closed = False
         self._close_error: DeviceError | None = None
+        self._losses = 0  # frames the producer reported lost (note_loss)
 
     @property
     def policy(self) -> RingPolicy:
@@ -136,21 +153,41 @@ class FrameRing(Generic[T]):
             self._items.append(item)
             self._condition.notify()
 
-    def get(self, timeout_s: float) -> T:
+    def note_loss(self) -> None:
+        """The producer lost a frame (damaged, incomplete): wake a consumer that asked to hear of it.
+
+        Counting is left to the frame ids (a gap counts the lost frame acquired and dropped).
+        """
+        with self._condition:
+            self._losses += 1
+            self._condition.notify_all()
+
+    @property
+    def losses(self) -> int:
+        """Frames the producer reported lost so far (a mark for ``get(..., fail_after_loss=)``)."""
+        with self._condition:
+            return self._losses
+
+    def get(self, timeout_s: float, *, fail_after_loss: int | None = None) -> T:
         """Take the next frame by the ring's policy.
 
         Parameters
         ----------
         timeout_s
             Longest wait in seconds (>= 0).
+        fail_after_loss
+            A value of :attr:`losses` taken earlier (before a trigger): while the ring is empty,
+            a loss reported since then raises :class:`FrameLost` at once.
 
         Raises
         ------
-        DeviceTimeout
-            No frame within ``timeout_s``.
+        WaitTimeout
+            No frame within ``timeout_s`` (a :class:`DeviceTimeout`).
         DeviceError
             The ring was closed and is empty: the error it was closed with (e.g.
             ``DeviceDisconnected`` after an unplug), or ``DeviceDisconnected`` for a plain close.
+        FrameLost
+            See ``fail_after_loss``.
         """
         if timeout_s < 0:
             raise ValueError(f"timeout_s must be >= 0, got {timeout_s}")
@@ -159,9 +196,12 @@ class FrameRing(Generic[T]):
             while not self._items:
                 if self._closed:
                     raise self._close_error or DeviceDisconnected(self._name, "frame ring closed; no more frames")
+                if fail_after_loss is not None and self._losses > fail_after_loss:
+                    raise FrameLost(self._name, f"{self._losses - fail_after_loss} frame(s) lost on the way "
+                                                "(damaged or incomplete block); expected a whole frame")
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
-                    raise DeviceTimeout(self._name, f"expected a frame within {timeout_s:g} s, got none")
+                    raise WaitTimeout(self._name, f"expected a frame within {timeout_s:g} s, got none")
                 self._condition.wait(remaining)
             if self._policy is RingPolicy.NEWEST_ONLY:
                 superseded = len(self._items) - 1

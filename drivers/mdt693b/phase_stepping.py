@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import time
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
@@ -21,6 +21,10 @@ from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b.driver import AxisLimits, VoltageReading
 
 logger = logging.getLogger(__name__)
+
+
+class AcquisitionCancelled(Exception):
+    """The ``cancel`` event of :func:`acquire_phase_steps` was set: the set was given up, on purpose."""
 
 
 @dataclass(frozen=True)
@@ -88,6 +92,7 @@ def acquire_phase_steps(
     calibration: PhaseStepCalibration,
     settle_s: float,
     timeout_s: float,
+    cancel: threading.Event | None = None,
 ) -> tuple[Frame, ...]:
     """Acquire one frame per phase step.
 
@@ -110,6 +115,9 @@ def acquire_phase_steps(
         Wait after each voltage change, s (piezo and mount settling).
     timeout_s
         Timeout of each device call, s.
+    cancel
+        When set (e.g. by a stop), the sequence gives up before its next step or during a settle
+        wait, at once: a long ``settle_s`` never delays a stop.
 
     Returns
     -------
@@ -123,6 +131,8 @@ def acquire_phase_steps(
         No steps, a non-finite step, or a negative ``settle_s`` / non-positive ``timeout_s``.
     LimitError
         A step's voltage lies outside ``piezo.limits(axis)``; nothing was sent.
+    AcquisitionCancelled
+        ``cancel`` was set.
     DeviceError
         Whatever the piezo or the camera raise during the sequence.
     """
@@ -138,11 +148,14 @@ def acquire_phase_steps(
         listed = ", ".join(f"{step:.4g} rad -> {volts:.4g} V" for step, volts in outside)
         raise LimitError(piezo.name, f"phase steps outside the axis {axis} limits [{limits.min_v:g}, "
                          f"{limits.max_v:g}] V: {listed}; nothing sent")
+    stop = cancel if cancel is not None else threading.Event()
     frames = []
     for step, volts in zip(steps, voltages):
+        if stop.is_set():
+            raise AcquisitionCancelled(f"{piezo.name}: phase-step set cancelled before step {step:.4g} rad")
         reading = piezo.set_voltage(axis, volts, timeout_s=timeout_s)
-        if settle_s:
-            time.sleep(settle_s)
+        if settle_s and stop.wait(settle_s):
+            raise AcquisitionCancelled(f"{piezo.name}: phase-step set cancelled while settling at {volts:.4g} V")
         camera.trigger_software(timeout_s)
         frame = camera.read_frame(timeout_s)
         metadata = {**frame.metadata, "pzt_axis": axis, "pzt_commanded_v": reading.commanded_v,

@@ -35,7 +35,10 @@ _MAX_CONSECUTIVE_STREAM_ERRORS = 50
 
 @dataclass(frozen=True)
 class U3VCounters:
-    """Frame counters (from the ring: ``acquired == delivered + dropped + pending``) and stream health.
+    """Frame counters (``acquired == delivered + dropped + pending``) and stream health.
+
+    The frame counters cover the camera's whole life (every ring, across reconnects; see
+    :class:`RingHistory`), so they never go backwards.
 
     Attributes
     ----------
@@ -61,6 +64,33 @@ class U3VCounters:
     stalls_cleared: int
     stream_timeouts: int
     transfer_errors: int
+
+
+class RingHistory:
+    """The frame counters of the rings a camera replaced (on reopen, or after a reader gave up).
+
+    A camera's counters are the replaced rings' plus the current ring's, so they only grow over the
+    camera's life, across reconnects; a replaced ring's pending frames count as dropped.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._totals = (0, 0, 0, 0)  # acquired, delivered, dropped, dropped_in_gaps
+
+    def replace(self, ring: FrameRing[Frame], name: str) -> FrameRing[Frame]:
+        """A fresh ring like ``ring`` (named ``name``); ``ring``'s counts carry on, its pending frames dropped."""
+        c = ring.counters()
+        with self._lock:
+            a, d, x, g = self._totals
+            self._totals = (a + c.acquired, d + c.delivered, x + c.dropped + c.pending, g + c.dropped_in_gaps)
+        return FrameRing(ring.capacity, ring.policy, name=name)
+
+    def with_current(self, ring: FrameRing[Frame], stats: dict[str, int]) -> U3VCounters:
+        """The camera's counters: the replaced rings' and ``ring``'s, with the stream-health ``stats``."""
+        c = ring.counters()
+        with self._lock:
+            a, d, x, g = self._totals
+        return U3VCounters(a + c.acquired, d + c.delivered, x + c.dropped, g + c.dropped_in_gaps, c.pending, **stats)
 
 
 def enable_stream(control: ControlChannel, sirm_address: int, deadline: float,
@@ -210,6 +240,7 @@ class StreamReader:
         if isinstance(outcome, DiscardedBlock):
             logger.warning("%s: discarded block %s: %s", self._name, outcome.block_id, outcome.reason)
             self._count("discarded_blocks")
+            self._ring.note_loss()
         elif isinstance(outcome, AssembledBlock):
             leader = outcome.leader
             frame = Frame(frame_id=leader.block_id, host_time_ns=time.time_ns(), device_timestamp=leader.timestamp,

@@ -28,7 +28,7 @@ from wavestack.drivers.errors import DeviceDisconnected, DeviceError, LimitError
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import FrameRing, RingPolicy
 from wavestack.drivers.u3v import bootstrap as bs
-from wavestack.drivers.u3v.acquisition import StreamReader, U3VCounters, enable_stream
+from wavestack.drivers.u3v.acquisition import RingHistory, StreamReader, U3VCounters, enable_stream
 from wavestack.drivers.u3v.connection import (CONTROL_PROTOCOL, STREAM_PROTOCOL, U3V_CLASS, U3V_SUBCLASS, Link,
                                               attach, find_device, release)
 from wavestack.drivers.u3v.feature_io import (lock_transport_layer, read_feature, unlock_transport_layer,
@@ -59,6 +59,7 @@ class U3VCamera:
         self._ring_capacity = ring_capacity
         self._ring_policy = RingPolicy(ring_policy)
         self._ring: FrameRing[Frame] = FrameRing(ring_capacity, self._ring_policy, name=self._name)
+        self._history = RingHistory()
         self._state_lock = threading.Lock()
         self._stats = {"discarded_blocks": 0, "stalls_cleared": 0, "stream_timeouts": 0, "transfer_errors": 0}
         self._link: Link | None = None
@@ -117,7 +118,7 @@ class U3VCamera:
         self._name = f"U3V camera {ids} {abrm.model} SN {abrm.serial_number}"
         link.control.name = self._name
         self._link = link
-        self._ring = FrameRing(self._ring_capacity, self._ring_policy, name=self._name)
+        self._ring = self._history.replace(self._ring, self._name)
         self._disconnected = None
         logger.info("%s: opened (GenCP %d.%d, max response %d ms)", self._name, *abrm.gencp_version,
                     abrm.max_response_time_ms)
@@ -157,6 +158,15 @@ class U3VCamera:
     def name(self) -> str:
         """Device name used in messages (vendor:product, model, serial)."""
         return self._name
+
+    @property
+    def connected(self) -> bool:
+        """True while the connection is usable (not closed, not unplugged since it was opened)."""
+        return not self._closed and self._disconnected is None and self._link is not None
+
+    def present(self) -> bool:
+        """True if the camera (by serial) is on the bus: a cheap check before :meth:`reopen`."""
+        return not self._closed and find_device(self._backend, self._serial) is not None
 
     @property
     def features(self) -> FeatureMap:
@@ -249,29 +259,17 @@ class U3VCamera:
     def read_feature(self, name: str, timeout_s: float | None = None) -> int | float | str:
         """Read any feature the driver resolved from the XML (see :attr:`features`), e.g. ``PayloadSize``.
 
-        Returns
-        -------
-        int, float or str
-            Integers and enumeration values as int, floats as float, strings (``DeviceVendorName``,
-            ``DeviceUserID``, ...) as text.
-
-        Raises
-        ------
-        ProtocolError
-            The XML does not describe ``name`` (or not within the supported subset), or it is
-            write-only, or the device refused the read.
+        Integers and enumeration values come as int, floats as float, strings (``DeviceVendorName``,
+        ...) as text. Raises ``ProtocolError`` when the XML does not describe ``name`` (or not
+        within the supported subset), it is write-only, or the device refused the read.
         """
         return self._read_feature(name, self._deadline(timeout_s))
 
     def set_device_user_id(self, name: str, timeout_s: float) -> None:
         """Write ``DeviceUserID``, the user-chosen name the camera keeps (SFNC Device Control).
 
-        Raises
-        ------
-        ValueError
-            Not ASCII, or longer than the register (nothing sent).
-        ProtocolError
-            The device's XML has no writable ``DeviceUserID``, or the device refused it.
+        Raises ``ValueError`` for a name not ASCII or longer than the register (nothing sent),
+        ``ProtocolError`` when the XML has no writable ``DeviceUserID`` or the device refused it.
         """
         deadline = self._deadline(timeout_s)
         self._write_feature(self._feature("DeviceUserID"), name, deadline)
@@ -304,7 +302,7 @@ class U3VCamera:
         try:
             sirm, sizes = enable_stream(link.control, link.sbrm.sirm_address, deadline, self._name)
             if self._ring.closed:  # the last reader gave up after repeated stream errors: start afresh
-                self._ring = FrameRing(self._ring_capacity, self._ring_policy, name=self._name)
+                self._ring = self._history.replace(self._ring, self._name)
             self._ring.discard_pending()
             self._execute("AcquisitionStart", deadline)
         except DeviceError:
@@ -318,8 +316,19 @@ class U3VCamera:
         logger.info("%s: streaming, payload %d B in %d x %d B + %d + %d", self._name, sirm.required_payload_size,
                     sizes.payload_count, sizes.payload_size, sizes.final1_size, sizes.final2_size)
 
-    def read_frame(self, timeout_s: float) -> Frame:
+    def loss_mark(self) -> int:
+        """Frames reported lost so far: take it before a trigger, pass it to :meth:`read_frame`."""
+        return self._ring.losses
+
+    def discard_pending(self) -> int:
+        """Drop the frames waiting in the ring (counted dropped); returns how many."""
+        return self._ring.discard_pending()
+
+    def read_frame(self, timeout_s: float, *, since_loss: int | None = None) -> Frame:
         """The next frame by the ring's policy.
+
+        ``since_loss``: a :meth:`loss_mark`; a block the stream discarded since then raises
+        :class:`~wavestack.drivers.ring.FrameLost` at once (a triggered frame that will not come).
 
         Raises
         ------
@@ -331,14 +340,13 @@ class U3VCamera:
         """
         if self._closed:
             raise DeviceDisconnected(self._name, "camera closed")
-        return self._ring.get(timeout_s)
+        return self._ring.get(timeout_s, fail_after_loss=since_loss)
 
     def counters(self) -> U3VCounters:
-        """Frame counters and stream health (see :class:`U3VCounters`)."""
-        ring = self._ring.counters()
+        """Frame counters over the camera's life, across reconnects, and stream health (see :class:`U3VCounters`)."""
         with self._state_lock:
             stats = dict(self._stats)
-        return U3VCounters(ring.acquired, ring.delivered, ring.dropped, ring.dropped_in_gaps, ring.pending, **stats)
+        return self._history.with_current(self._ring, stats)
 
     def _count(self, key: str) -> None:
         with self._state_lock:
@@ -406,7 +414,7 @@ class U3VCamera:
         """Reconnect after an unplug/replug: find the same camera (by serial), re-read its bootstrap.
 
         Waits up to ``timeout_s`` for the camera to re-enumerate. A fresh frame ring replaces the
-        closed one (counters restart); if acquisition was running when the camera went away (and
+        closed one (the counters carry on); if acquisition was running when the camera went away (and
         :meth:`stop` was not called since), it is started again.
 
         Raises

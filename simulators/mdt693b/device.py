@@ -31,6 +31,7 @@ import logging
 import random
 import re
 import threading
+from collections import deque
 from collections.abc import Callable
 
 from wavestack.simulators.mdt693b.compatibility import MDT693ACommands, frame_mdt693a
@@ -43,6 +44,10 @@ VoltageListener = Callable[[str, float], None]
 _ERRORS = ("CMD_NOT_DEFINED", "CMD_ARG_INVALID")
 _MAX_LINE = 256
 _SPLIT_DELAY_S = 0.01  # gap between the pieces of a split reply; well below any driver timeout
+#: Command lines kept in :attr:`MDT693BDevice.commands` (the newest; a long run's memory stays flat).
+COMMAND_HISTORY = 10_000
+#: Bytes kept in :attr:`MDT693BDevice.received` (the newest).
+RECEIVED_HISTORY = 256 * 1024
 
 
 class MDT693BDevice(MDT693ACommands):
@@ -77,7 +82,8 @@ class MDT693BDevice(MDT693ACommands):
         self._axes = {name: AxisState() for name in self.personality.axes}
         self._line = bytearray()
         self._received = bytearray()
-        self._commands: list[str] = []
+        self._commands: deque[str] = deque(maxlen=COMMAND_HISTORY)
+        self.commands_received = 0  # every command line ever, also those the history forgot
         self._random = random.Random(seed)
         self._lock = threading.Lock()
 
@@ -109,13 +115,16 @@ class MDT693BDevice(MDT693ACommands):
 
     @property
     def received(self) -> bytes:
-        """Every byte the host has written, in order (also while silent or garbled)."""
+        """The newest bytes the host has written, in order (also while silent or garbled).
+
+        At most :data:`RECEIVED_HISTORY` bytes: a long run's memory stays flat.
+        """
         with self._lock:
-            return bytes(self._received)
+            return bytes(self._received[-RECEIVED_HISTORY:])
 
     @property
     def commands(self) -> tuple[str, ...]:
-        """Command lines received (terminator removed), in order."""
+        """The newest :data:`COMMAND_HISTORY` command lines received (terminator removed), in order."""
         with self._lock:
             return tuple(self._commands)
 
@@ -131,6 +140,8 @@ class MDT693BDevice(MDT693ACommands):
         changes: list[tuple[str, float]] = []
         with self._lock:
             self._received += data
+            if len(self._received) > 2 * RECEIVED_HISTORY:  # trimmed now and then: amortised O(1) per byte
+                del self._received[:-RECEIVED_HISTORY]
             for byte in data:
                 if byte == 0x0A:
                     continue
@@ -164,6 +175,7 @@ class MDT693BDevice(MDT693ACommands):
     def _answer(self, line: bytes, changes: list[tuple[str, float]]) -> bytes:
         text = line.decode("latin-1")
         self._commands.append(text)
+        self.commands_received += 1
         if self.faults.silent:
             return b""
         if self._compatibility:

@@ -271,6 +271,11 @@ class SimulatedU3VCamera:
                 self._wait(deadline)
                 self._check(session)
             raise TransferTimeout("stream read timed out (fault)")
+        if self.faults.stream_paused:
+            while deadline is not None and self._now() < deadline and self.faults.stream_paused:
+                self._wait(deadline)
+                self._check(session)
+            raise TransferTimeout("stream paused (fault)")
         if self._stream.has_pending():
             return None
         while True:

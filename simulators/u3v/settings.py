@@ -115,6 +115,9 @@ class U3VSimFaults:
     pending_ack_ms
         While > 0, every acknowledged command is first answered by PENDING_ACK advertising this
         many ms, and its real acknowledge becomes readable half that time later.
+    stream_paused
+        While True the stream sends nothing (every stream read waits its timeout): a camera that
+        stalls without going away. The control channel still answers; a block in flight waits.
     """
 
     timeout_reads: int = 0
@@ -123,6 +126,7 @@ class U3VSimFaults:
     corrupt_leader: CorruptionKind | None = None
     corrupt_trailer: CorruptionKind | None = None
     pending_ack_ms: int = 0
+    stream_paused: bool = False
 
 
 @dataclass(frozen=True)

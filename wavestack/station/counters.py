@@ -11,6 +11,12 @@ and, since every processed set holds ``frames_per_set`` frames, ``frames process
 frames_per_set x sets processed``. :class:`Counters` refuses to exist otherwise, so a count that
 does not add up is a loud error where it is made, not a wrong number in a report. The counting
 follows pylablib's frame counters (and :class:`~wavestack.drivers.ring.FrameRing`'s).
+
+What a miscount does to a run (decided in issue 13): never a wrong number reported, never a dead
+station. The station catches the ``ValueError`` where it takes a snapshot, logs it at ERROR, makes
+that cycle's result invalid with the reason (``"counters: ..."``, so it is never sent to the PLC)
+and reports the last snapshot that added up; the next cycle counts afresh. Since the counts of a
+run only grow, a stale snapshot is an undercount, never a count that goes backwards.
 """
 
 from __future__ import annotations

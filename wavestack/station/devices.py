@@ -16,9 +16,10 @@ from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any
 
+from wavestack.drivers.errors import DeviceDisconnected
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
-from wavestack.drivers.plc import PolishingLink
+from wavestack.drivers.plc import CommandLimits, PolishingLink
 from wavestack.drivers.u3v import U3VCamera
 from wavestack.config import BIT_DEPTH, StationConfig, build_calibration, build_piezo, build_simulated_device
 from wavestack.simulators import attach_simulated_device, register_serial_simulators
@@ -80,6 +81,35 @@ def configure_camera(camera: U3VCamera, config: StationConfig) -> None:
     if config.camera.exposure_us is not None:
         camera.set_exposure_us(config.camera.exposure_us, timeout)
     camera.set_trigger_mode(config.phase_stepping, timeout)
+
+
+def reconnect_devices(devices: StationDevices, config: StationConfig, *, force_camera: bool = False) -> None:
+    """Bring back what a fault took away: reopen a lost camera or piezo and re-apply its configuration.
+
+    The camera is reopened when its connection is lost (or ``force_camera``, after repeated
+    failures) and it is on the bus again, then configured; a piezo whose port was lost is opened
+    again (echo off, identity and limits read anew) and set to the calibration's bias voltage.
+    A device that is still connected is left alone (a timeout or a garbled reply does not need a
+    reconnect: the drivers resynchronise on their next exchange).
+
+    Raises
+    ------
+    DeviceError
+        A device is not back yet (the caller backs off and tries again).
+    """
+    camera = devices.camera
+    if not camera.connected or force_camera:
+        if not camera.present():
+            raise DeviceDisconnected(camera.name, "expected the camera on the bus again; not there yet")
+        camera.reopen(timeout_s=config.camera.timeout_s)
+        configure_camera(camera, config)
+        logger.info("camera %s is back", camera.name)
+    piezo, settings = devices.piezo, config.pzt
+    if piezo is not None and settings is not None and not piezo.is_open:
+        piezo.open(timeout_s=settings.timeout_s)
+        if devices.calibration is not None:
+            piezo.set_voltage(settings.phase_axis, devices.calibration.bias_v, timeout_s=settings.timeout_s)
+        logger.info("piezo %s is back", piezo.name)
 
 
 def _simulated_bench(config: StationConfig, stack: ExitStack) -> tuple[SimulatedInterferometer, Any]:
@@ -179,7 +209,8 @@ def open_station_devices(config: StationConfig, stack: ExitStack) -> StationDevi
             stack.callback(simulator.stop)
             host, port = simulator.host, simulator.port
             devices.plc_simulator = simulator
-        link = PolishingLink(host, port, link_settings.register_map(), link_settings.link_timing())
+        link = PolishingLink(host, port, link_settings.register_map(), link_settings.link_timing(),
+                             command_limits=CommandLimits(config.outputs.max_removal_nm, config.outputs.max_step_nm))
         stack.callback(link.close)
         link.connect(timeout_s=max(timeout, link_settings.io_timeout_s * 4))
         link.self_check(timeout_s=max(timeout, link_settings.io_timeout_s * 4))

@@ -9,22 +9,31 @@ drops frames instead of building a backlog. Both count frames and sets separatel
 - :class:`PhaseStepSource` — a thread of its own steps the piezo, triggers the camera per step,
   tags each frame with the commanded and read-back voltage, and puts whole sets into a newest-only
   ring of sets; a device error ends the thread and is handed to the pipeline through the ring.
+  A block the camera discarded (damaged leader, trailer or payload) costs only the set it
+  belonged to (:class:`~wavestack.drivers.ring.FrameLost`, at once), up to
+  :data:`MAX_LOST_SETS_IN_A_ROW` sets in a row. A stop is seen within one 0.1 s wait slice, one
+  piezo exchange, or at once during a settle wait; the thread never raises.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Sequence
 
-from wavestack.drivers.errors import DeviceError
+from wavestack.drivers.errors import DeviceError, ProtocolError
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration, acquire_phase_steps
-from wavestack.drivers.ring import FrameRing, RingPolicy
+from wavestack.drivers.mdt693b.phase_stepping import AcquisitionCancelled
+from wavestack.drivers.ring import FrameLost, FrameRing, RingPolicy, WaitTimeout
 from wavestack.drivers.u3v import U3VCamera
 from wavestack.station.counters import Counters, FrameCounts, SetCounts
 
 logger = logging.getLogger(__name__)
+
+_WAIT_SLICE_S = 0.1  # longest a stepping thread waits for a frame before it looks at its stop flag
+MAX_LOST_SETS_IN_A_ROW = 3  # sets given up for a lost frame before the source reports the camera as failing
 
 
 class _CameraFrames:
@@ -80,19 +89,40 @@ class CarrierSource:
 
 
 class _SetInHand:
-    """The camera as the stepping sequence sees it, counting the frames read for the set in hand."""
+    """The camera as the stepping sequence sees it, counting the frames read for the set in hand.
 
-    def __init__(self, camera: U3VCamera) -> None:
+    A frame is awaited in slices of at most :data:`_WAIT_SLICE_S`, so a stop is seen within one
+    slice; a block the camera discarded after the trigger ends the wait at once
+    (:class:`~wavestack.drivers.ring.FrameLost`) instead of after the whole timeout.
+    """
+
+    def __init__(self, camera: U3VCamera, stop: threading.Event, frame_timeout_s: float) -> None:
         self._camera = camera
+        self._stop = stop
+        self._frame_timeout_s = frame_timeout_s
+        self._loss_mark = camera.loss_mark()
         self.frames = 0
 
     def trigger_software(self, timeout_s: float) -> None:
+        self._loss_mark = self._camera.loss_mark()
         self._camera.trigger_software(timeout_s)
 
     def read_frame(self, timeout_s: float) -> Frame:
-        frame = self._camera.read_frame(timeout_s)
-        self.frames += 1
-        return frame
+        """The triggered frame, within the station's frame timeout (``timeout_s`` bounds device calls)."""
+        deadline = time.monotonic() + self._frame_timeout_s
+        while True:
+            if self._stop.is_set():
+                raise AcquisitionCancelled(f"{self._camera.name}: stopped while waiting for a triggered frame")
+            remaining = deadline - time.monotonic()
+            try:
+                frame = self._camera.read_frame(max(0.0, min(_WAIT_SLICE_S, remaining)),
+                                                since_loss=self._loss_mark)
+            except WaitTimeout:
+                if remaining <= _WAIT_SLICE_S:
+                    raise
+                continue
+            self.frames += 1
+            return frame
 
 
 class PhaseStepSource:
@@ -110,7 +140,10 @@ class PhaseStepSource:
         Phase steps of one set.
     calibration : PhaseStepCalibration
     settle_s, timeout_s : float
-        Wait after each step; timeout of each device call.
+        Wait after each step; timeout of each device call, s.
+    frame_timeout_s : float, optional
+        Longest wait for a triggered frame before the camera counts as failing, s (default
+        ``timeout_s``); the station passes its ``frame_timeout_s``.
     ring_capacity : int
         Sets held for the pipeline (newest-only).
 
@@ -124,7 +157,8 @@ class PhaseStepSource:
     """
 
     def __init__(self, camera: U3VCamera, piezo: MDT693B, *, axis: str, steps_rad: Sequence[float],
-                 calibration: PhaseStepCalibration, settle_s: float, timeout_s: float, ring_capacity: int) -> None:
+                 calibration: PhaseStepCalibration, settle_s: float, timeout_s: float, ring_capacity: int,
+                 frame_timeout_s: float | None = None) -> None:
         self._camera = camera
         self._piezo = piezo
         self._axis = axis
@@ -132,6 +166,7 @@ class PhaseStepSource:
         self._calibration = calibration
         self._settle_s = settle_s
         self._timeout_s = timeout_s
+        self._frame_timeout_s = timeout_s if frame_timeout_s is None else frame_timeout_s
         self._capacity = ring_capacity
         self._ring: FrameRing[tuple[Frame, ...]] = FrameRing(ring_capacity, RingPolicy.NEWEST_ONLY, name="phase sets")
         self._stop = threading.Event()
@@ -156,22 +191,45 @@ class PhaseStepSource:
         self._thread.start()
 
     def _run(self) -> None:
+        """The stepping thread: sets into the ring until stopped or a device fails; never raises."""
+        lost_in_a_row = 0
         while not self._stop.is_set():
-            in_hand = _SetInHand(self._camera)
+            in_hand = _SetInHand(self._camera, self._stop, self._frame_timeout_s)
             try:
                 frames = acquire_phase_steps(self._piezo, in_hand, self._axis, self._steps,
                                              calibration=self._calibration, settle_s=self._settle_s,
-                                             timeout_s=self._timeout_s)
+                                             timeout_s=self._timeout_s, cancel=self._stop)
+            except FrameLost as error:  # one damaged block: this set is lost, the next one goes on
+                self._count_lost(in_hand)
+                lost_in_a_row += 1
+                logger.warning("phase-step set given up (%d in a row): %s", lost_in_a_row, error)
+                self._camera.discard_pending()  # a late frame of the lost set must not start the next one
+                if lost_in_a_row >= MAX_LOST_SETS_IN_A_ROW:
+                    self._ring.close(error)
+                    return
+                continue
+            except AcquisitionCancelled:
+                self._count_lost(in_hand)
+                return
             except DeviceError as error:
-                with self._count_lock:
-                    self._lost_frames += in_hand.frames
+                self._count_lost(in_hand)
                 if not self._stop.is_set():
                     logger.warning("phase-step acquisition stopped: %s", error)
                     self._ring.close(error)
                 return
+            except Exception as error:  # a bug must not leave the pipeline waiting, nor raise in a thread
+                self._count_lost(in_hand)
+                logger.exception("phase-step acquisition failed")
+                self._ring.close(ProtocolError(self._piezo.name, f"phase-step acquisition failed: {error!r}"))
+                return
+            lost_in_a_row = 0
             with self._count_lock:
                 self._ring.put(frames, frame_id=self._sets)
             self._sets += 1
+
+    def _count_lost(self, in_hand: _SetInHand) -> None:
+        with self._count_lock:
+            self._lost_frames += in_hand.frames
 
     def read_set(self, timeout_s: float) -> tuple[Frame, ...]:
         """The newest complete set."""
@@ -204,7 +262,10 @@ class PhaseStepSource:
         """Stop the stepping thread and the camera; idempotent."""
         self._stop.set()
         if self._thread is not None:
-            self._thread.join(timeout=self._timeout_s * (len(self._steps) + 2) + 5.0)
+            # the thread sees the stop within one wait slice or one piezo exchange (settle waits are cut short)
+            self._thread.join(timeout=self._timeout_s * 2 + 5.0)
+            if self._thread.is_alive():
+                logger.error("phase-step thread still running %.0f s after the stop", self._timeout_s * 2 + 5.0)
             self._thread = None
         self._ring.close()
         try:

@@ -13,10 +13,19 @@ fitter builds on the fitter cache's worker. On a simulated camera the devices br
 :class:`~wavestack.station.truth.TruthCheck`; the loop knows no simulator type.
 
 A device lost while running does not end the run: the result says so (invalid, never forwarded),
-the station reopens the camera with a capped back-off, re-applies its configuration and goes on.
+the station reopens the camera or the piezo with a capped back-off
+(:func:`~wavestack.station.devices.reconnect_devices`), re-applies its configuration and goes on.
 The lost connection's source is retired (what it still held counts as dropped) and a new source
 counts on from there, so the run's frame and set counters
-(:class:`~wavestack.station.counters.Counters`) add up across reconnects.
+(:class:`~wavestack.station.counters.Counters`) add up across reconnects and only grow. Counts
+that do not add up (a bug) make the result invalid, with the reason, logged at ERROR; the result
+carries the last consistent counters.
+
+A device fault is not a host fault: while the loop waits for a set or backs off, it waits in
+slices of at most the heartbeat period (a quarter of the PLC watchdog time) and keeps the PLC's
+heartbeat alive between them (:meth:`PlcOutput.keep_alive`, a heartbeat, never a command). Only a
+stalled pipeline (processing, or a device call that does not return) starves the watchdog. The
+stop event is seen within one slice.
 """
 
 from __future__ import annotations
@@ -24,17 +33,17 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import asdict, dataclass, field
-
-import numpy as np
+from dataclasses import asdict, dataclass, field, replace
 
 from wavestack.config import StationConfig
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout
 from wavestack.drivers.frames import Frame
+from wavestack.drivers.ring import WaitTimeout
 from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
-from wavestack.station.devices import StationDevices, configure_camera, phase_steps_rad
+from wavestack.station.devices import StationDevices, phase_steps_rad, reconnect_devices
 from wavestack.station.interferometer import SetProcessor
+from wavestack.station.latency import LatencyHistogram
 from wavestack.station.outputs import PlcOutput
 from wavestack.station.results import StationResult, json_ready
 from wavestack.station.shack_hartmann import SlopeOutcome, SlopeProcessor
@@ -43,6 +52,9 @@ from wavestack.station.sources import CarrierSource, PhaseStepSource
 logger = logging.getLogger(__name__)
 
 __all__ = ["ResultSink", "Station", "StationSummary", "build_processor"]
+
+_MAX_WAIT_SLICE_S = 0.25  # longest wait between looks at the stop event (and heartbeats, when shorter)
+_FIRST_BACKOFF_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -66,16 +78,17 @@ class StationSummary:
 
 
 class _Tally:
-    """What the summary counts, result by result."""
+    """What the summary counts, result by result, in constant memory (latencies in a histogram)."""
 
     def __init__(self) -> None:
-        self.latencies: list[float] = []
+        self.latencies = LatencyHistogram()
         self.stage_totals: dict[str, float] = {}
-        self.valid = self.aperture_changes = self.fallbacks = 0
+        self.processed = self.valid = self.aperture_changes = self.fallbacks = 0
         self.last_reason: str | None = None
 
     def add(self, result: StationResult) -> None:
-        self.latencies.append(result.latency_ms)
+        self.latencies.add(result.latency_ms)
+        self.processed += 1
         for stage, ms in result.timings_ms.items():
             self.stage_totals[stage] = self.stage_totals.get(stage, 0.0) + ms
         self.valid += result.valid
@@ -85,13 +98,12 @@ class _Tally:
             self.last_reason = result.reason
 
     def summary(self, results: int, duration: float, counters: Counters) -> StationSummary:
-        lat = np.asarray(self.latencies) if self.latencies else np.asarray([np.nan])
         return StationSummary(
             results=results, valid=self.valid, duration_s=duration,
             results_per_s=results / duration if duration else 0.0,
-            latency_p50_ms=float(np.percentile(lat, 50)), latency_p99_ms=float(np.percentile(lat, 99)),
+            latency_p50_ms=self.latencies.percentile(50), latency_p99_ms=self.latencies.percentile(99),
             counters=counters, aperture_changes=self.aperture_changes, fallback_results=self.fallbacks,
-            stage_ms={k: v / max(1, len(self.latencies)) for k, v in self.stage_totals.items()},
+            stage_ms={k: v / max(1, self.processed) for k, v in self.stage_totals.items()},
             last_reason=self.last_reason)
 
 
@@ -110,12 +122,18 @@ class Station:
         self.processor = build_processor(config)
         self._source: CarrierSource | PhaseStepSource | None = self._make_source()
         self._retired = Counters.zero(self._source.frames_per_set)  # sources of lost connections
+        self._last_counters = self._retired  # the last snapshot that added up
+        self._not_back = DeviceDisconnected(devices.camera.name, "acquisition not started")  # while no source
         self._output: PlcOutput | None = None
+        self._slice_s = _MAX_WAIT_SLICE_S
         if devices.link is not None and config.plc is not None:
+            heartbeat_period_s = config.plc.link.watchdog_timeout_s / 4
             self._output = PlcOutput(devices.link, config.outputs, config.plc.link.n_terms,
                                      wavelength_nm=config.station.wavelength_nm,
                                      max_age_s=config.station.max_result_age_s,
-                                     timeout_s=config.plc.link.io_timeout_s * 4)
+                                     timeout_s=config.plc.link.io_timeout_s * 4,
+                                     heartbeat_period_s=heartbeat_period_s)
+            self._slice_s = min(_MAX_WAIT_SLICE_S, heartbeat_period_s)
 
     def _make_source(self) -> CarrierSource | PhaseStepSource:
         config, devices = self._config, self._devices
@@ -125,7 +143,8 @@ class Station:
         return PhaseStepSource(devices.camera, devices.piezo, axis=config.pzt.phase_axis,
                                steps_rad=phase_steps_rad(config), calibration=devices.calibration,
                                settle_s=config.pzt.settle_s, timeout_s=config.camera.timeout_s,
-                               ring_capacity=config.station.set_ring_capacity)
+                               ring_capacity=config.station.set_ring_capacity,
+                               frame_timeout_s=config.station.frame_timeout_s)
 
     def close(self) -> None:
         """Stop acquisition and the fitter worker; idempotent."""
@@ -147,36 +166,64 @@ class Station:
         """
         started = time.monotonic()
         tally = _Tally()
-        index = 0
-        backoff_s = 0.05
+        index = failures = 0
+        backoff_s = _FIRST_BACKOFF_S
         if self._source is not None:
-            self._source.start()
+            self._start_source()
         while not stop.is_set():
             if max_results is not None and index >= max_results:
                 break
             if duration_s is not None and time.monotonic() - started >= duration_s:
                 break
             try:
-                frames = self._read_set()
-            except (DeviceTimeout, DeviceDisconnected, DeviceError) as error:
+                frames = self._read_set(stop)
+            except DeviceError as error:
                 result = self._device_lost(index, error)
                 on_result(CycleRecord(result))
                 index += 1
                 tally.last_reason = result.reason
-                self._recover(stop, backoff_s)
+                failures += error.device == self._devices.camera.name  # the camera's own, in a row
+                self._recover(stop, backoff_s, force_camera=failures > 2)
                 backoff_s = min(backoff_s * 2, self._config.station.reconnect_max_s)
                 continue
-            backoff_s = 0.05
+            if frames is None:  # stopped while waiting
+                break
+            failures, backoff_s = 0, _FIRST_BACKOFF_S
             record = self._cycle(index, frames)
             on_result(record)
             index += 1
             tally.add(record.result)
-        return tally.summary(index, time.monotonic() - started, self._counters())
+        return tally.summary(index, time.monotonic() - started, self._counters()[0])
 
-    def _read_set(self) -> tuple[Frame, ...]:
+    def _read_set(self, stop: threading.Event) -> tuple[Frame, ...] | None:
+        """The next set within ``frame_timeout_s``, awaited in slices with the PLC kept alive; None if stopped."""
         if self._source is None:
-            raise DeviceDisconnected(self._devices.camera.name, "camera not reconnected yet")
-        return self._source.read_set(self._config.station.frame_timeout_s)
+            raise self._not_back
+        timeout_s = self._config.station.frame_timeout_s
+        deadline = time.monotonic() + timeout_s
+        while not stop.is_set():
+            remaining = deadline - time.monotonic()
+            try:
+                return self._source.read_set(max(0.0, min(self._slice_s, remaining)))
+            except WaitTimeout:
+                if remaining <= self._slice_s:
+                    raise DeviceTimeout(self._devices.camera.name,
+                                        f"expected a set within frame_timeout_s = {timeout_s:g} s, got none") from None
+            self._keep_alive()
+        return None
+
+    def _keep_alive(self) -> None:
+        if self._output is not None:
+            self._output.keep_alive(time.monotonic())
+
+    def _wait(self, stop: threading.Event, seconds: float) -> bool:
+        """Wait ``seconds`` in slices, keeping the PLC alive; True if stopped."""
+        deadline = time.monotonic() + seconds
+        while (remaining := deadline - time.monotonic()) > 0:
+            if stop.wait(min(self._slice_s, remaining)):
+                return True
+            self._keep_alive()
+        return stop.is_set()
 
     def _cycle(self, index: int, frames: tuple[Frame, ...]) -> CycleRecord:
         """One set, one way: outcome -> result -> output -> the record of the cycle."""
@@ -184,30 +231,42 @@ class Station:
         truth = check.capture(frames[0]) if check is not None else None  # at once: the simulator forgets
         outcome = self.processor.process([f.pixels for f in frames])
         errors = check.compare(truth, outcome) if check is not None and truth is not None else None
+        counters, miscount = self._counters()
         result = make_result(index, frames, outcome, ordering=self._config.processing.ordering,
-                             counters=self._counters(), now_ns=time.time_ns(), truth=errors)
+                             counters=counters, now_ns=time.time_ns(), truth=errors)
+        if miscount is not None:  # never a wrong number, never a dead station: an invalid result
+            result = replace(result, valid=False, reason=miscount)
         sent = self._output.send(result) if self._output is not None else None
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
                            outcome.lenslets if isinstance(outcome, SlopeOutcome) else None)
 
-    def _recover(self, stop: threading.Event, wait_s: float) -> None:
-        """Reopen the camera after a loss and restart acquisition; the caller backs off on failure.
+    def _recover(self, stop: threading.Event, wait_s: float, *, force_camera: bool) -> None:
+        """After a device fault: retire the source, back off, bring the devices back, start a new source.
 
-        The lost source is read no more: what it still held is counted dropped, and a new source
-        starts once the camera is back.
+        The lost source is read no more: what it still held is counted dropped. A device not back
+        yet leaves no source; the next cycle reports it and backs off longer.
         """
         self._retire_source()
-        if stop.wait(wait_s):
+        if self._wait(stop, wait_s):
             return
-        camera = self._devices.camera
         try:
-            camera.reopen(timeout_s=self._config.camera.timeout_s)
-            configure_camera(camera, self._config)
-            self._source = self._make_source()
-            self._source.start()
-            logger.info("camera %s is back", camera.name)
+            reconnect_devices(self._devices, self._config, force_camera=force_camera)
         except DeviceError as error:
-            logger.warning("camera still unavailable: %s", error)
+            logger.warning("devices still unavailable: %s", error)
+            self._not_back = DeviceDisconnected(error.device, f"not back yet ({error.detail})")
+            return
+        self._keep_alive()
+        self._source = self._make_source()
+        self._start_source()
+
+    def _start_source(self) -> None:
+        assert self._source is not None
+        try:
+            self._source.start()
+        except DeviceError as error:  # the next read reports the missing source
+            logger.warning("acquisition did not start: %s", error)
+            self._not_back = DeviceDisconnected(error.device, f"acquisition did not start ({error.detail})")
+            self._retire_source()
 
     # ------------------------------------------------------------------ records
 
@@ -219,17 +278,30 @@ class Station:
             source.stop()
         except DeviceError as error:  # a camera already gone may not acknowledge the stop
             logger.info("stopping the lost source: %s", error)
-        self._retired = self._retired.plus(source.counters().retired())
+        self._devices.camera.discard_pending()  # counted dropped with the source, not again by the next
+        try:
+            self._retired = self._retired.plus(source.counters().retired())
+        except ValueError as error:  # keep the last consistent counts: they still only grow
+            logger.error("counters of the retired source do not add up: %s", error)
+            self._retired = self._last_counters.retired()
 
-    def _counters(self) -> Counters:
-        """Frames and sets this run: retired sources and the current one (each adding up exactly)."""
-        if self._source is None:
-            return self._retired
-        return self._retired.plus(self._source.counters())
+    def _counters(self) -> tuple[Counters, str | None]:
+        """Frames and sets this run (retired sources and the current one), and why they are stale, if they are.
+
+        Counts that do not add up (a bug) are logged at ERROR; the last consistent counts are
+        returned with the reason, and the caller makes its result invalid.
+        """
+        try:
+            counters = self._retired if self._source is None else self._retired.plus(self._source.counters())
+        except ValueError as error:
+            logger.error("station counters do not add up (result made invalid): %s", error)
+            return self._last_counters, f"counters: {error}"
+        self._last_counters = counters
+        return counters, None
 
     def _device_lost(self, index: int, error: DeviceError) -> StationResult:
         now_ns = time.time_ns()
-        result = StationResult.invalid(index, f"device: {error}", self._counters(),
+        result = StationResult.invalid(index, f"device: {error}", self._counters()[0],
                                        ordering=self._config.processing.ordering, exposure_time_ns=now_ns)
         return with_output(result, self._output.device_lost(f"device: {error}", now_ns)
                            if self._output is not None else None)
