@@ -5,8 +5,8 @@ Run:  .venv/bin/python benchmarks/soak.py --duration-s 600 --seed 1 [--fault-eve
 
 Builds the station ``wavestack run`` builds (the embedded default configuration unless
 ``--config``: every device simulated, 1024 x 1024 five-step phase-shifted sets, PLC output on)
-and runs it in a thread. A scheduler thread injects a fault every ``--fault-every-s`` (+-25 %),
-kind and parameters drawn from ``--seed``, through the simulators' own switches only (camera
+and runs it in a thread. A scheduler thread injects a fault every ``--fault-every-s`` (+-25 %, counted
+from the station's first result), kind and parameters drawn from ``--seed``, through the simulators' own switches only (camera
 unplug/replug and stream faults, piezo garbage/silence/split replies/unplug, PLC reply faults,
 delay, restart, frozen heartbeat echo, e-stop; ``--list-faults``). A monitor thread samples VmRSS
 (``/proc/self/status``) and the counters every ``--sample-every-s``.
@@ -35,6 +35,7 @@ import json
 import logging
 import os
 import random
+import signal
 import sys
 import threading
 import time
@@ -187,11 +188,18 @@ class FaultScheduler:
         self._schedule, self._runner, self._observer, self._failures = schedule, runner, observer, failures
         self.stop = threading.Event()
         self.injected = 0
+        self.first_result_t_s: float | None = None
+        self.verbose = False
         self._last: tuple[Window, Injection] | None = None
 
     def run(self) -> None:
+        """Thread target: the schedule, its times counted from the station's first result."""
+        while self._observer.results == 0:  # a fault during start-up could not be told from start-up itself
+            if self.stop.wait(0.1):
+                return
+        self.first_result_t_s = self._observer.now()
         for fault in self._schedule:
-            if self.stop.wait(max(0.0, fault.t_s - self._observer.now())):
+            if self.stop.wait(max(0.0, self.first_result_t_s + fault.t_s - self._observer.now())):
                 return
             self._settle_last()
             self._inject(fault)
@@ -208,6 +216,9 @@ class FaultScheduler:
         self._observer.open_window(window, device_snapshot(devices), incarnation)
         self.injected += 1
         self._last = (window, injection)
+        if self.verbose:
+            print(f"soak: t {window.t_s:6.1f} s  fault #{fault.index} {fault.kind.name} ({injection.params})",
+                  file=sys.stderr)
         for delay, action in injection.steps:
             if delay > 0 and self.stop.wait(delay):
                 return
@@ -295,12 +306,14 @@ class Monitor:
     def _check_stuck(self, t: float, window: Window) -> None:
         if self._runner.devices is None or (window.clear_t_s is not None and t < window.clear_t_s):
             return  # restarting, or a fault still active
-        quiet = max(window.clear_t_s or 0.0, self._runner.started_t_s)
+        # counted from this station's start, not from the last fault: with a fault every 10 s a dead
+        # station would otherwise never be quiet long enough to be called stuck
+        start = self._runner.started_t_s
         limit, why = self._args.stuck_s, None
-        if t - max(self._observer.last_valid_t_s, quiet) > limit:
-            why = f"no valid result for {t - max(self._observer.last_valid_t_s, quiet):.0f} s"
-        elif self._tripped_since is not None and t - max(self._tripped_since, quiet) > limit:
-            why = f"PLC watchdog tripped for {t - max(self._tripped_since, quiet):.0f} s (outputs silent)"
+        if t - max(self._observer.last_valid_t_s, start) > limit:
+            why = f"no valid result for {t - max(self._observer.last_valid_t_s, start):.0f} s"
+        elif self._tripped_since is not None and t - max(self._tripped_since, start) > limit:
+            why = f"PLC watchdog tripped for {t - max(self._tripped_since, start):.0f} s (outputs silent)"
         key = (window.index, self._runner.incarnation)
         if why is None or key == self._stuck_key:
             return
@@ -354,7 +367,9 @@ def _run_threads(args: argparse.Namespace, runner: StationRunner, scheduler: Fau
                threading.Thread(target=monitor.run, name="soak-monitor")]
     for thread in threads:
         thread.start()
-    runner.stop.wait(max(0.0, args.duration_s - observer.now()))
+    while not runner.stop.wait(min(1.0, max(0.0, args.duration_s - observer.now()))):
+        if observer.now() >= args.duration_s:
+            break
     scheduler.finish()
     threads[1].join()
     observer.close(device_snapshot(runner.devices), runner.incarnation)
@@ -391,35 +406,43 @@ def main(argv: list[str] | None = None) -> int:
     threading.excepthook = record_thread_exception
     if args.tracemalloc:
         tracemalloc.start(1)
-    started = time.monotonic()
+    started, load_at_start = time.monotonic(), os.getloadavg()
     observer = Observer(started)
     runner = StationRunner(config, observer, failures, restart_on_failure=args.on_failure == "restart")
     scheduler = FaultScheduler(schedule, runner, observer, failures)
+    scheduler.verbose = not args.json
     monitor = Monitor(args, runner, observer, failures, scheduler)
+    for signum in (signal.SIGINT, signal.SIGTERM):  # end early, still with the report
+        signal.signal(signum, lambda *_: runner.stop.set())
     _run_threads(args, runner, scheduler, monitor, observer)
     failures.entries["counters_backwards"] = list(observer.backwards)
-    return _report(args, config, schedule, kinds, observer, runner, monitor, failures, log_counter, started)
+    return _report(args, config, schedule, kinds, observer, runner, monitor, failures, log_counter, started,
+                   scheduler.first_result_t_s, load_at_start)
 
 
 def _report(args: argparse.Namespace, config: StationConfig, schedule: list[ScheduledFault], kinds: tuple,
             observer: Observer, runner: StationRunner, monitor: Monitor, failures: Failures,
-            log_counter: _LogCounter, started: float) -> int:
+            log_counter: _LogCounter, started: float, first_result_t_s: float | None,
+            load_at_start: tuple[float, float, float]) -> int:
     elapsed = time.monotonic() - started
     sites = None
     if args.tracemalloc and monitor.warm_snapshot is not None:
         gc.collect()
         sites = growth_sites(monitor.warm_snapshot, tracemalloc.take_snapshot(), elapsed - monitor.warm_t_s)
+    load = f"load average {load_at_start[0]:.1f} at the start, {os.getloadavg()[0]:.1f} at the end on " \
+           f"{os.cpu_count()} CPUs"
     station = f"station {config.source}: {config.station.kind}, {config.camera_simulator.width} x " \
               f"{config.camera_simulator.height}, {config.processing.method}" if config.camera.simulated \
         else f"station {config.source}"
     schedule_text = (f"seed {args.seed}, a fault every {args.fault_every_s:g} s +-25 % ({len(schedule)} scheduled) "
                      f"from {len(kinds)} kinds" if schedule else "no faults")
-    run = {"command": " ".join(["benchmarks/soak.py", *(sys.argv[1:])]), "station": station,
+    run = {"command": " ".join(["benchmarks/soak.py", *(sys.argv[1:])]), "station": station, "load": load,
            "schedule": schedule_text, "duration_s": args.duration_s, "seed": args.seed, "elapsed_s": elapsed,
            "results": observer.results, "valid": observer.valid,
            "results_per_s": observer.results / elapsed if elapsed else 0.0,
            "station_runs": len(runner.summaries) + runner.crashes, "crashes": runner.crashes,
            "restarts": runner.restarts, "tracemalloc": args.tracemalloc,
+           "first_result_t_s": first_result_t_s,
            "log_counts": dict(log_counter.counts.most_common(12))}
     rss = rss_verdict(monitor.samples, args.warmup_s)
     report = verdict_json(run, monitor.samples, rss, observer.windows, failures.entries, sites)

@@ -201,7 +201,7 @@ def render_text(report: dict[str, Any], samples: list[Sample], windows: list[Win
                 summary_lines: list[str]) -> str:
     """The plain-text report: samples, faults, faults by kind, failures, growth sites, verdict."""
     run, rss = report["run"], report["rss"]
-    lines = [f"# soak: {run['command']}", f"# {run['station']}; {run['schedule']}", ""]
+    lines = [f"# soak: {run['command']}", f"# {run['station']}; {run['schedule']}; {run['load']}", ""]
     lines += _sample_rows(samples, every_s) + [""]
     if len(windows) > 1:
         lines += ["## faults (injected -> what the results and counters show)", *_fault_rows(windows), ""]
