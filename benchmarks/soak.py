@@ -5,24 +5,25 @@ Run:  .venv/bin/python benchmarks/soak.py --duration-s 600 --seed 1 [--fault-eve
 
 Builds the station ``wavestack run`` builds (the embedded default configuration unless
 ``--config``: every device simulated, 1024 x 1024 five-step phase-shifted sets, PLC output on)
-and runs it in a thread. A scheduler thread injects a fault every ``--fault-every-s`` (+-25 %, counted
-from the station's first result), kind and parameters drawn from ``--seed``, through the simulators' own switches only (camera
-unplug/replug and stream faults, piezo garbage/silence/split replies/unplug, PLC reply faults,
-delay, restart, frozen heartbeat echo, e-stop; ``--list-faults``). A monitor thread samples VmRSS
-(``/proc/self/status``) and the counters every ``--sample-every-s``.
+and runs it in a thread. A scheduler thread injects a fault every ``--fault-every-s`` (+-25 %,
+counted from the station's first result), kind and parameters drawn from ``--seed``, through the
+simulators' own switches only (camera unplug/replug and stream faults, piezo garbage, silence,
+split replies, unplug, PLC reply faults, delay, restart, frozen heartbeat echo, e-stop;
+``--list-faults``). A monitor thread samples VmRSS (``/proc/self/status``) and the counters every
+``--sample-every-s``.
 
 What escapes the station (an exception out of ``Station.run``) is recorded with the fault before
 it, and a fresh station is built on fresh simulators so the run goes on; so is a stuck station (no
-valid result, or the PLC watchdog tripped, for ``--stuck-s`` after a fault cleared), unless
+valid result, or the PLC watchdog tripped, for ``--stuck-s`` while no fault is active), unless
 ``--on-failure continue`` (report only) or ``stop``. Exceptions in any thread are caught by
-``threading.excepthook``.
+``threading.excepthook``. Ctrl-C or SIGTERM ends the run early, with the report.
 
 Printed: a table over time (RSS, results, frame counters, faults so far), one row per fault
 (its parameters, the signals it left in the results and counters, the time to the next valid
 result, its problems), the faults by kind, every failure, and the verdict: RSS slope after the
 warm-up (least squares, MB/min) and its largest deviation from the post-warm-up mean (target
-+-5 %), faults unaccounted for, unhandled exceptions, results per second. ``--tracemalloc`` adds the
-allocation sites that grew from the end of the warm-up to the end (file:line, KiB, KiB/min);
++-5 %), faults unaccounted for, unhandled exceptions, results per second. ``--tracemalloc`` adds
+the allocation sites that grew from the end of the warm-up to the end (file:line, KiB, KiB/min);
 tracing slows the station and adds its own memory, so read RSS from a run without it. ``--json``
 prints one JSON object instead. Exit status 0 when every target is met, 1 otherwise.
 """
@@ -51,22 +52,14 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from soak_faults import FAULT_KINDS, Injection, ScheduledFault, Targets, make_schedule, select_kinds  # noqa: E402
 from soak_observe import DEVICE_SIGNALS, Observer, Window, device_snapshot  # noqa: E402
-from soak_report import Sample, growth_sites, render_text, rss_verdict, verdict_json  # noqa: E402
+from soak_monitor import Monitor  # noqa: E402
+from soak_report import growth_sites, render_text, rss_verdict, verdict_json  # noqa: E402
 
 from wavestack.config import StationConfig, load_station_config  # noqa: E402
 from wavestack.station import Station, StationSummary, counter_lines, open_station_devices  # noqa: E402
 
 FAILURE_KINDS = ("station_crashes", "thread_exceptions", "stuck", "watchdog_trips", "startup_watchdog_trips",
                  "counters_backwards", "injection_errors")
-
-
-def rss_mb() -> float:
-    """This process's resident set (VmRSS), MB."""
-    with open("/proc/self/status", encoding="ascii") as status:
-        for line in status:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    raise RuntimeError("/proc/self/status has no VmRSS line")
 
 
 @dataclass
@@ -243,88 +236,6 @@ class FaultScheduler:
     def finish(self) -> None:
         self.stop.set()
         self._settle_last()
-
-
-class Monitor:
-    """Samples RSS and counters, notices PLC watchdog trips and stuck stations."""
-
-    def __init__(self, args: argparse.Namespace, runner: StationRunner, observer: Observer, failures: Failures,
-                 scheduler: FaultScheduler) -> None:
-        self._args, self._runner, self._observer, self._failures = args, runner, observer, failures
-        self._scheduler = scheduler
-        self.stop = threading.Event()
-        self.samples: list[Sample] = []
-        self.warm_snapshot: tracemalloc.Snapshot | None = None
-        self.warm_t_s = 0.0
-        self._trips_seen = 0
-        self._tripped_since: float | None = None
-        self._stuck_key: tuple[int, int] | None = None
-        self._next_sample = 0.0
-
-    def run(self) -> None:
-        while not self.stop.wait(0.5):
-            t = self._observer.now()
-            self._watch(t)
-            if t >= self._next_sample:
-                self._next_sample = t + self._args.sample_every_s
-                self.sample(t)
-            if self._args.tracemalloc and self.warm_snapshot is None and t >= self._args.warmup_s:
-                gc.collect()
-                self.warm_snapshot, self.warm_t_s = tracemalloc.take_snapshot(), self._observer.now()
-
-    def sample(self, t: float) -> None:
-        counters, _ = self._runner.totals()
-        frames = counters.frames if counters is not None else None
-        traced = tracemalloc.get_traced_memory()[0] / 2**20 if tracemalloc.is_tracing() else None
-        sample = Sample(round(t, 1), rss_mb(), traced, self._observer.results, self._observer.valid,
-                        frames.acquired if frames else 0, frames.processed if frames else 0,
-                        frames.dropped if frames else 0, self._scheduler.injected, self._runner.crashes,
-                        self._runner.restarts)
-        self.samples.append(sample)
-        if not self._args.json:
-            print(f"soak: t {sample.t_s:6.0f} s  RSS {sample.rss_mb:7.1f} MB  results {sample.results:6d} "
-                  f"({sample.valid} valid)  faults {sample.faults}  crashes {sample.crashes}", file=sys.stderr)
-
-    def _watch(self, t: float) -> None:
-        _, trips = self._runner.totals()
-        window = self._observer.current
-        if trips > self._trips_seen:
-            # before this station's first command the station re-arms a trip itself (slow first result)
-            startup = not self._observer.sent_this_station
-            window.startup_trips += (trips - self._trips_seen) if startup else 0
-            self._failures.add("startup_watchdog_trips" if startup else "watchdog_trips",
-                               f"t={t:.1f} s: PLC watchdog tripped (x{trips - self._trips_seen}) after "
-                               f"{window.kind} #{window.index}" + (" before this station's first command" if startup
-                                                                   else ""))
-            self._trips_seen = trips
-        devices = self._runner.devices
-        plc = devices.plc_simulator if devices is not None else None
-        tripped = plc is not None and plc.watchdog_state.value == "tripped"
-        self._tripped_since = (self._tripped_since or t) if tripped else None
-        self._check_stuck(t, window)
-
-    def _check_stuck(self, t: float, window: Window) -> None:
-        if self._runner.devices is None or (window.clear_t_s is not None and t < window.clear_t_s):
-            return  # restarting, or a fault still active
-        # counted from this station's start, not from the last fault: with a fault every 10 s a dead
-        # station would otherwise never be quiet long enough to be called stuck
-        start = self._runner.started_t_s
-        limit, why = self._args.stuck_s, None
-        if t - max(self._observer.last_valid_t_s, start) > limit:
-            why = f"no valid result for {t - max(self._observer.last_valid_t_s, start):.0f} s"
-        elif self._tripped_since is not None and t - max(self._tripped_since, start) > limit:
-            why = f"PLC watchdog tripped for {t - max(self._tripped_since, start):.0f} s (outputs silent)"
-        key = (window.index, self._runner.incarnation)
-        if why is None or key == self._stuck_key:
-            return
-        self._stuck_key = key
-        text = f"t={t:.1f} s: {why} after {window.kind} #{window.index}"
-        window.stuck = why
-        self._failures.add("stuck", text)
-        if self._args.on_failure == "restart":
-            self._runner.request_restart()
-        elif self._args.on_failure == "stop":
-            self._runner.stop_all()
 
 
 class _LogCounter(logging.Handler):
