@@ -23,8 +23,8 @@ Printed: a table over time (RSS, results, frame counters, faults so far), one ro
 result, its problems), the faults by kind, every failure, and the verdict: RSS slope after the
 warm-up (least squares, MB/min) and its largest deviation from the post-warm-up mean (target
 +-5 %), faults unaccounted for, unhandled exceptions, results per second. ``--tracemalloc`` adds
-the allocation sites that grew from the end of the warm-up to the end (file:line, KiB, KiB/min);
-tracing slows the station and adds its own memory, so read RSS from a run without it. ``--json``
+the allocation sites that grew from the end of the warm-up to the end, the station still running
+(file:line, KiB, KiB/min, bytes per result); tracing slows the station and adds its own memory, so read RSS from a run without it. ``--json``
 prints one JSON object instead. Exit status 0 when every target is met, 1 otherwise.
 """
 
@@ -51,7 +51,7 @@ from typing import Any
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from soak_faults import FAULT_KINDS, Injection, ScheduledFault, Targets, make_schedule, select_kinds  # noqa: E402
-from soak_observe import DEVICE_SIGNALS, Observer, Window, device_snapshot  # noqa: E402
+from soak_observe import Observer, Window, device_snapshot  # noqa: E402
 from soak_monitor import Monitor  # noqa: E402
 from soak_report import growth_sites, render_text, rss_verdict, verdict_json  # noqa: E402
 
@@ -200,9 +200,10 @@ class FaultScheduler:
     def _inject(self, fault: ScheduledFault) -> None:
         devices, incarnation = self._runner.devices, self._runner.incarnation
         window = Window(fault.index, fault.kind.name, self._observer.now())
-        if devices is None:
-            window.skipped = "no station: restarting"
-            self._observer.open_window(window, dict.fromkeys(DEVICE_SIGNALS, 0), incarnation)
+        if devices is None or self._observer.results_this_station == 0:
+            # a fault while a fresh station starts could not be told from its start-up
+            window.skipped = "no station: restarting" if devices is None else "station starting (no result yet)"
+            self._observer.open_window(window, device_snapshot(devices), incarnation)
             return
         injection = fault.kind.inject(_targets(devices), random.Random(fault.seed))
         window.params, window.clear_t_s = injection.params, window.t_s + injection.duration_s
@@ -260,6 +261,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--sample-every-s", type=float, default=5.0)
     p.add_argument("--table-every-s", type=float, default=30.0, help="rows of the printed table")
     p.add_argument("--stuck-s", type=float, default=30.0, help="no valid result / tripped watchdog this long: stuck")
+    p.add_argument("--startup-s", type=float, default=120.0, help="no first result this long after a start: stuck")
     p.add_argument("--on-failure", choices=("restart", "continue", "stop"), default="restart",
                    help="after a crash or a stuck station: build a fresh one (default), report only, or stop")
     p.add_argument("--tracemalloc", action="store_true", help="print the allocation sites that grew")
@@ -287,6 +289,10 @@ def _run_threads(args: argparse.Namespace, runner: StationRunner, scheduler: Fau
     monitor.stop.set()
     threads[2].join()
     monitor.sample(observer.now())
+    if tracemalloc.is_tracing():  # the last snapshot while the station still runs: closing frees its histories
+        gc.collect()
+        monitor.end_snapshot, monitor.end_t_s, monitor.end_results = \
+            tracemalloc.take_snapshot(), observer.now(), observer.results
     runner.stop_all()
     threads[0].join()
 
@@ -337,9 +343,9 @@ def _report(args: argparse.Namespace, config: StationConfig, schedule: list[Sche
             load_at_start: tuple[float, float, float]) -> int:
     elapsed = time.monotonic() - started
     sites = None
-    if args.tracemalloc and monitor.warm_snapshot is not None:
-        gc.collect()
-        sites = growth_sites(monitor.warm_snapshot, tracemalloc.take_snapshot(), elapsed - monitor.warm_t_s)
+    if monitor.warm_snapshot is not None and monitor.end_snapshot is not None:
+        sites = growth_sites(monitor.warm_snapshot, monitor.end_snapshot, monitor.end_t_s - monitor.warm_t_s,
+                             monitor.end_results - monitor.warm_results)
     load = f"load average {load_at_start[0]:.1f} at the start, {os.getloadavg()[0]:.1f} at the end on " \
            f"{os.cpu_count()} CPUs"
     station = f"station {config.source}: {config.station.kind}, {config.camera_simulator.width} x " \

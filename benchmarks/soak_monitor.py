@@ -1,7 +1,8 @@
 """The soak's monitor thread: samples VmRSS and the counters, notices PLC watchdog trips and stuck stations.
 
 A station is *stuck* when it has produced no valid result, or its PLC watchdog has stayed tripped,
-for ``--stuck-s`` seconds while no fault is active (counted from the station's own start). The
+for ``--stuck-s`` seconds while no fault is active (counted from the station's own start), or no
+result at all ``--startup-s`` after it started (a loaded machine starts slowly). The
 monitor then asks the runner for a fresh station (``--on-failure restart``), stops the soak
 (``stop``) or only reports it (``continue``).
 """
@@ -41,6 +42,10 @@ class Monitor:
         self.samples: list[Sample] = []
         self.warm_snapshot: tracemalloc.Snapshot | None = None
         self.warm_t_s = 0.0
+        self.warm_results = 0
+        self.end_snapshot: tracemalloc.Snapshot | None = None
+        self.end_t_s = 0.0
+        self.end_results = 0
         self._trips_seen = 0
         self._tripped_since: float | None = None
         self._stuck_key: tuple[int, int] | None = None
@@ -56,6 +61,7 @@ class Monitor:
             if self._args.tracemalloc and self.warm_snapshot is None and t >= self._args.warmup_s:
                 gc.collect()
                 self.warm_snapshot, self.warm_t_s = tracemalloc.take_snapshot(), self._observer.now()
+                self.warm_results = self._observer.results
 
     def sample(self, t: float) -> None:
         counters, _ = self._runner.totals()
@@ -95,7 +101,10 @@ class Monitor:
         # station would otherwise never be quiet long enough to be called stuck
         start = self._runner.started_t_s
         limit, why = self._args.stuck_s, None
-        if t - max(self._observer.last_valid_t_s, start) > limit:
+        if self._observer.results_this_station == 0:  # start-up (first aperture, fitter): its own limit
+            if t - start > self._args.startup_s:
+                why = f"no result {t - start:.0f} s after the station started"
+        elif t - max(self._observer.last_valid_t_s, start) > limit:
             why = f"no valid result for {t - max(self._observer.last_valid_t_s, start):.0f} s"
         elif self._tripped_since is not None and t - max(self._tripped_since, start) > limit:
             why = f"PLC watchdog tripped for {t - max(self._tripped_since, start):.0f} s (outputs silent)"

@@ -132,6 +132,7 @@ class Observer:
         self.last_counters: Any = None
         self.backwards: list[str] = []
         self.sent_this_station = False  # a command went to the PLC since this station started
+        self.results_this_station = 0
         self._last_acquired = -1
 
     def now(self) -> float:
@@ -149,6 +150,7 @@ class Observer:
         with self._lock:
             window = self.current
             self.results += 1
+            self.results_this_station += 1
             window.results += 1
             window.counts.update(signals)
             cleared = window.clear_t_s is not None and t >= window.clear_t_s
@@ -180,6 +182,7 @@ class Observer:
         with self._lock:
             self._last_acquired = -1
             self.sent_this_station = False
+            self.results_this_station = 0
 
     def open_window(self, window: Window, snapshot: dict[str, int], incarnation: int) -> Window:
         """Close the current window with ``snapshot`` and start ``window``."""

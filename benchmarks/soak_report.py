@@ -89,11 +89,16 @@ class GrowthSite:
     grew_kib: float
     blocks: int
     kib_per_min: float
+    bytes_per_result: float
 
 
-def growth_sites(before: tracemalloc.Snapshot, after: tracemalloc.Snapshot, span_s: float,
+def growth_sites(before: tracemalloc.Snapshot, after: tracemalloc.Snapshot, span_s: float, results: int,
                  top: int = 15) -> list[GrowthSite]:
-    """The ``top`` sites (file:line) by growth of their live allocations from ``before`` to ``after``."""
+    """The ``top`` sites (file:line) by growth of their live allocations from ``before`` to ``after``.
+
+    ``span_s`` and ``results`` are the time and the station results between the snapshots: growth
+    per result does not depend on how fast a loaded machine runs the station.
+    """
     ignore = [tracemalloc.Filter(False, tracemalloc.__file__), tracemalloc.Filter(False, "<frozen importlib*"),
               tracemalloc.Filter(False, "<unknown>")]
     diff = after.filter_traces(ignore).compare_to(before.filter_traces(ignore), "lineno")
@@ -104,7 +109,8 @@ def growth_sites(before: tracemalloc.Snapshot, after: tracemalloc.Snapshot, span
         frame = stat.traceback[0]
         where = f"{os.path.relpath(frame.filename, _ROOT) if frame.filename.startswith(_ROOT) else frame.filename}" \
                 f":{frame.lineno}"
-        sites.append(GrowthSite(where, stat.size_diff / 1024, stat.count_diff, stat.size_diff / 1024 / span_s * 60))
+        sites.append(GrowthSite(where, stat.size_diff / 1024, stat.count_diff, stat.size_diff / 1024 / span_s * 60,
+                                stat.size_diff / max(1, results)))
         if len(sites) == top:
             break
     return sites
@@ -213,17 +219,18 @@ def render_text(report: dict[str, Any], samples: list[Sample], windows: list[Win
         lines += [f"{name.replace('_', ' ')}: {len(entries)}"] + [f"  - {e}" for e in entries[:20]]
     if report["growth_sites"] is not None:
         lines += ["", "## growing allocation sites (tracemalloc, warm-up -> end)", "| site | grew KiB | blocks | "
-                  "KiB/min |", "|---|---:|---:|---:|"]
-        lines += [f"| {s['where']} | {s['grew_kib']:.1f} | {s['blocks']:+d} | {s['kib_per_min']:.1f} |"
-                  for s in report["growth_sites"]]
+                  "KiB/min | bytes/result |", "|---|---:|---:|---:|---:|"]
+        lines += [f"| {s['where']} | {s['grew_kib']:.1f} | {s['blocks']:+d} | {s['kib_per_min']:.1f} | "
+                  f"{s['bytes_per_result']:.0f} |" for s in report["growth_sites"]]
     traced = "" if rss["traced_slope_mb_per_min"] is None else \
         f"; traced Python memory {rss['traced_slope_mb_per_min']:+.3f} MB/min"
     lines += ["", "## verdict", f"RSS after the {rss['warmup_s']:.0f} s warm-up ({rss['samples']} samples): slope "
               f"{rss['slope_mb_per_min']:+.3f} MB/min, {rss['first_mb']:.1f} -> {rss['last_mb']:.1f} MB, mean "
               f"{rss['mean_mb']:.1f} MB, max deviation {rss['max_deviation_pct']:.2f} % (target +-"
               f"{rss['tolerance_pct']:g} %){traced}",
-              f"faults: {len(report['faults'])} injected, {len(report['unaccounted'])} unaccounted "
-              f"{report['unaccounted'] or ''}".rstrip(),
+              f"faults: {sum(not f['skipped'] for f in report['faults'])} injected "
+              f"({sum(bool(f['skipped']) for f in report['faults'])} skipped while a station started), "
+              f"{len(report['unaccounted'])} unaccounted {report['unaccounted'] or ''}".rstrip(),
               f"unhandled exceptions: {report['unhandled_exceptions']}; station failures: "
               f"{report['station_failures']}",
               f"results: {run['results']} ({run['valid']} valid) in {run['elapsed_s']:.1f} s: "
