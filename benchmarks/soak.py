@@ -15,7 +15,7 @@ split replies, unplug, PLC reply faults, delay, restart, frozen heartbeat echo, 
 What escapes the station (an exception out of ``Station.run``) is recorded with the fault before
 it, and a fresh station is built on fresh simulators so the run goes on; so is a stuck station (no
 valid result, or the PLC watchdog tripped, for ``--stuck-s`` while no fault is active), unless
-``--on-failure continue`` (report only) or ``stop``. Exceptions in any thread are caught by
+``--on-failure continue`` (a stuck station is only reported, a crash ends the run) or ``stop``. Exceptions in any thread are caught by
 ``threading.excepthook``. Ctrl-C or SIGTERM ends the run early, with the report.
 
 Printed: a table over time (RSS, results, frame counters, faults so far), one row per fault
@@ -110,6 +110,7 @@ class StationRunner:
             if self.stop.is_set() or not self._restart_on_failure:
                 break
             self.restarts += 1
+        self.stop.set()  # no station any more: the run ends
 
     def _one_station(self) -> None:
         self._station_stop = stop = threading.Event()
@@ -263,7 +264,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--stuck-s", type=float, default=30.0, help="no valid result / tripped watchdog this long: stuck")
     p.add_argument("--startup-s", type=float, default=120.0, help="no first result this long after a start: stuck")
     p.add_argument("--on-failure", choices=("restart", "continue", "stop"), default="restart",
-                   help="after a crash or a stuck station: build a fresh one (default), report only, or stop")
+                   help="after a crash or a stuck station: build a fresh one (default), or not (a stuck one "
+                        "is only reported with 'continue'; a crash ends the run), or stop")
     p.add_argument("--tracemalloc", action="store_true", help="print the allocation sites that grew")
     p.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
     p.add_argument("--list-faults", action="store_true", help="print the fault kinds and exit")
