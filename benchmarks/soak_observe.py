@@ -165,6 +165,8 @@ class Observer:
                 if key in window.reasons or len(window.reasons) < _MAX_REASONS:
                     window.reasons[key] += 1
             self.sent_this_station |= "sent" in signals
+            if "sent" in signals and window.clear_t_s is not None and t < window.clear_t_s:
+                window.counts["sent_while_active"] += 1  # a command while the fault was on
             if "sent" in signals and cleared and window.first_sent_after_clear_s is None:
                 window.first_sent_after_clear_s = t - window.clear_t_s
             self._check_counters(result.counters, t)

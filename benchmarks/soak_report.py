@@ -20,6 +20,9 @@ __all__ = ["GrowthSite", "RssVerdict", "Sample", "fault_problems", "growth_sites
            "verdict_json"]
 
 _KINDS = {kind.name: kind for kind in FAULT_KINDS}
+# faults during which no command may reach the PLC (issue 13: commands while the PLC is not scanning)
+_NO_COMMANDS_WHILE = {"plc_freeze_echo": "the heartbeat echo was frozen (PLC not scanning)",
+                      "plc_estop": "the e-stop was pressed"}
 RECOVERY_GRACE_S = 5.0  # a fault followed this soon by the next one is not judged on its recovery
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -129,6 +132,9 @@ def fault_problems(window: Window) -> list[str]:
         problems.append("never fired")
     elif kind is not None and kind.expects and not any(signals.get(name) for name in kind.expects):
         problems.append("UNACCOUNTED (expected " + " or ".join(kind.expects) + ")")
+    unsafe = window.counts.get("sent_while_active", 0)
+    if unsafe and window.kind in _NO_COMMANDS_WHILE:
+        problems.append(f"UNSAFE: {unsafe} commands sent while {_NO_COMMANDS_WHILE[window.kind]}")
     trips = signals.get("watchdog_trips", 0) - window.startup_trips
     if trips > 0:
         problems.append(f"WATCHDOG TRIPPED x{trips}")
@@ -177,7 +183,7 @@ def verdict_json(run: dict[str, Any], samples: list[Sample], rss: RssVerdict, wi
     exceptions = len(failures["thread_exceptions"]) + len(failures["station_crashes"])
     station_failures = sum(len(failures[k]) for k in ("watchdog_trips", "stuck", "counters_backwards"))
     station_failures += len(failures["injection_errors"])
-    station_failures += sum(1 for w in faults if any(p.startswith(("no valid", "outputs silent"))
+    station_failures += sum(1 for w in faults if any(p.startswith(("no valid", "outputs silent", "UNSAFE"))
                                                       for p in fault_problems(w)))
     targets = {"rss_flat": rss.flat, "faults_accounted": not unaccounted, "no_unhandled_exceptions": exceptions == 0,
                "no_station_failures": station_failures == 0}

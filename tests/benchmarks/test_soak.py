@@ -65,6 +65,16 @@ def test_a_fault_without_its_evidence_is_unaccounted() -> None:
     assert fault_problems(window) == ["never fired"]
 
 
+def test_a_command_sent_while_the_plc_is_not_scanning_is_unsafe() -> None:
+    window = Window(5, "plc_freeze_echo", 10.0, clear_t_s=13.0, end_t_s=20.0)
+    window.results = window.valid = 20
+    window.first_valid_after_clear_s = 0.1
+    window.counts.update(heartbeat_errors=6)
+    assert fault_problems(window) == []
+    window.counts["sent_while_active"] = 6
+    assert fault_problems(window) == ["UNSAFE: 6 commands sent while the heartbeat echo was frozen (PLC not scanning)"]
+
+
 def _soak(*options: str, timeout_s: float = 240.0) -> dict:
     command = [sys.executable, str(ROOT / "benchmarks" / "soak.py"), "--config", str(SMALL), "--json",
                "--sample-every-s", "2", *options]
