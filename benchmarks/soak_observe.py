@@ -109,7 +109,7 @@ def _classify(result: Any) -> list[str]:
         beat = output.heartbeat
         if beat is not None and not beat.ok:
             found.append("heartbeat_errors")
-        if beat is not None and beat.ok and beat.watchdog_tripped:
+        if beat is not None and beat.watchdog_tripped:  # read from the status, or a heartbeat refused by a trip
             found.append("watchdog_tripped_results")
         if beat is not None and beat.estop:
             found.append("estop_seen")
