@@ -1,0 +1,113 @@
+"""benchmarks/soak.py: its schedule and verdict as pure functions, and two short soaks of the small station.
+
+The soaks run the script as a subprocess (it installs its own ``threading.excepthook`` and
+logging handler, which must not touch pytest's), with a dense fault schedule on the 256 x 256
+test station, and read its ``--json`` report.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from soak_faults import FAULT_KINDS, make_schedule, select_kinds  # noqa: E402
+from soak_observe import Window  # noqa: E402
+from soak_report import Sample, fault_problems, rss_verdict  # noqa: E402
+
+SMALL = ROOT / "tests" / "configs" / "station-small.toml"
+
+
+def _samples(rss_of_t) -> list[Sample]:
+    return [Sample(float(t), rss_of_t(t), None, 0, 0, 0, 0, 0, 0, 0, 0) for t in range(0, 600, 5)]
+
+
+def test_the_schedule_is_seeded_spaced_and_stops_before_the_end() -> None:
+    a = make_schedule(7, 120.0, 10.0, FAULT_KINDS)
+    assert a == make_schedule(7, 120.0, 10.0, FAULT_KINDS) != make_schedule(8, 120.0, 10.0, FAULT_KINDS)
+    times = [f.t_s for f in a]
+    # one fault per 10 s slot from 10 s to 110 s, each moved by at most 25 % of the spacing
+    assert len(a) == 11 and all(abs(t - 10.0 * (k + 1)) <= 2.5 for k, t in enumerate(times))
+    assert make_schedule(7, 120.0, 0.0, FAULT_KINDS) == []
+
+
+def test_fault_kinds_are_chosen_by_name_or_device_and_unknown_names_are_refused() -> None:
+    assert {k.device for k in select_kinds("camera")} == {"camera"}
+    assert [k.name for k in select_kinds("plc_estop,piezo_unplug")] == ["piezo_unplug", "plc_estop"]
+    assert {k.device for k in select_kinds(None, {"camera", "plc"})} == {"camera", "plc"}
+    with pytest.raises(ValueError, match="camera_melt"):
+        select_kinds("camera_melt")
+
+
+def test_rss_is_flat_within_five_percent_and_a_creep_is_not() -> None:
+    flat = rss_verdict(_samples(lambda t: 400.0 + (3.0 if t % 20 else -3.0)), warmup_s=60.0)
+    # +-3 MB of noise (three samples up for one down: mean 401.5) on 400 MB: at most 4.5 / 401.5 = 1.1 %
+    assert flat.flat and abs(flat.slope_mb_per_min) < 0.1 and flat.max_deviation_pct < 1.2
+    # 5 MB/min (the creep issue 13 measured) from 405 to 450 MB after the warm-up: +-22 MB around 427, 5.2 %
+    creep = rss_verdict(_samples(lambda t: 400.0 + 5.0 * t / 60.0), warmup_s=60.0)
+    assert not creep.flat and creep.slope_mb_per_min == pytest.approx(5.0)
+
+
+def test_a_fault_without_its_evidence_is_unaccounted() -> None:
+    window = Window(3, "camera_unplug_short", 10.0, clear_t_s=10.5, end_t_s=20.0)
+    window.results = window.valid = 12
+    window.first_valid_after_clear_s = 0.2
+    assert any(p.startswith("UNACCOUNTED") for p in fault_problems(window))
+    window.counts["device_lost"] = 1
+    assert fault_problems(window) == []
+    window.fired = False  # a one-shot the simulator never used is reported, not counted as unaccounted
+    assert fault_problems(window) == ["never fired"]
+
+
+def test_a_command_sent_while_the_plc_is_not_scanning_is_unsafe() -> None:
+    window = Window(5, "plc_freeze_echo", 10.0, clear_t_s=13.0, end_t_s=20.0)
+    window.results = window.valid = 20
+    window.first_valid_after_clear_s = 0.1
+    window.counts.update(heartbeat_errors=6)
+    assert fault_problems(window) == []
+    window.counts["sent_while_active"] = 6
+    assert fault_problems(window) == ["UNSAFE: 6 commands sent while the heartbeat echo was frozen (PLC not scanning)"]
+
+
+def _soak(*options: str, timeout_s: float = 240.0) -> dict:
+    command = [sys.executable, str(ROOT / "benchmarks" / "soak.py"), "--config", str(SMALL), "--json",
+               "--sample-every-s", "2", *options]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s, cwd=ROOT)
+    assert done.returncode in (0, 1), done.stderr[-3000:]
+    return json.loads(done.stdout)
+
+
+@pytest.mark.slow
+def test_a_dense_camera_fault_soak_leaves_no_exception_and_every_fault_accounted_for() -> None:
+    report = _soak("--duration-s", "25", "--fault-every-s", "2", "--seed", "2", "--faults", "camera",
+                   "--on-failure", "continue")
+    failures = report["failures"]
+    assert failures["thread_exceptions"] == [] and failures["station_crashes"] == [], failures
+    assert report["unhandled_exceptions"] == 0 and failures["injection_errors"] == []
+    faults = [f for f in report["faults"] if not f["skipped"]]
+    assert len(faults) >= 5, faults  # 25 s at one fault per 2 s; long unplugs delay the next one
+    assert report["unaccounted"] == [], [f for f in faults if f["index"] in report["unaccounted"]]
+    for fault in faults:
+        if fault["kind"].startswith(("camera_unplug", "camera_flap")):
+            # each unplug shows up as device-lost results and a reconnect (a new plug session)
+            assert fault["signals"].get("device_lost", 0) >= 1, fault
+            assert fault["signals"].get("camera_replugs", 0) >= 1, fault
+    assert report["last_summary"] is not None and report["last_summary"]["results"] > 0
+    assert report["run"]["results"] >= report["last_summary"]["results"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=False, reason="issue 13: a PLC reply fault ends Station.run with ValueError (a failed "
+                   "command's id is re-sent with new values); passes once the station survives PLC glitches")
+def test_a_dense_plc_fault_soak_leaves_no_exception() -> None:
+    # a reply fault a second: within 20 s one hits a command write (today the run ends there: --on-failure stop)
+    report = _soak("--duration-s", "20", "--fault-every-s", "1", "--seed", "4", "--faults",
+                   "plc_drop_replies,plc_truncate_replies,plc_corrupt_replies", "--on-failure", "stop")
+    assert report["failures"]["station_crashes"] == [] and report["unhandled_exceptions"] == 0, report["failures"]
+    assert report["unaccounted"] == [] and report["last_summary"] is not None
