@@ -103,10 +103,8 @@ def test_a_dense_camera_fault_soak_leaves_no_exception_and_every_fault_accounted
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="issue 13: a PLC reply fault ends Station.run with ValueError (a failed "
-                   "command's id is re-sent with new values); passes once the station survives PLC glitches")
 def test_a_dense_plc_fault_soak_leaves_no_exception() -> None:
-    # a reply fault a second: within 20 s one hits a command write (today the run ends there: --on-failure stop)
+    # a reply fault a second: within 20 s one hits a command write (before issue 13 the run ended there)
     report = _soak("--duration-s", "20", "--fault-every-s", "1", "--seed", "4", "--faults",
                    "plc_drop_replies,plc_truncate_replies,plc_corrupt_replies", "--on-failure", "stop")
     assert report["failures"]["station_crashes"] == [] and report["unhandled_exceptions"] == 0, report["failures"]
