@@ -17,7 +17,7 @@ Where firmware versions differ this module accepts all the variants we found doc
   reply as well as after it (``b"vlimit?\\r*[ 100]\\r*"``), so when a body is expected, leading prompt
   characters are skipped (:func:`split_reply` with ``expect_body=True``).
 * Numbers: bracketed (``[ 100]``, ``[  24.8]``, ``[  0.24]``) or bare (``0``, ``150.5``, as
-  ``xmin?``/``xmax?`` answer on firmware 1.05).
+  ``xmin?``/``xmax?`` answer on firmware 1.05; that is C's ``%g``, so ``1e-05`` is read too).
 * ``vlimit?``: the switch voltage (``[ 100]``) or, as the built-in help text words it, the switch
   position (0 = 75 V, 1 = 100 V, 2 = 150 V).
 * Errors: firmware 1.10 answers an unknown command with ``CMD_NOT_DEFINED`` (and a bad argument with
@@ -59,7 +59,7 @@ MAX_REPLY_BYTES = 4096
 _DEFAULT_DEVICE = "MDT693B"
 _COMMAND = re.compile(r"^[A-Za-z?%][A-Za-z0-9?=.,+\- ]*$")
 _NUMBER = re.compile(r"^\s*(?:\[\s*(?P<bracketed>[^\[\]]*?)\s*\]|(?P<bare>[^\[\]]*?))\s*$")
-_FLOAT = re.compile(r"^[+-]?(?:\d+(?:\.\d*)?|\.\d+)$")
+_FLOAT = re.compile(r"^[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$", re.ASCII)  # a C "%g" may use an exponent
 _LINE_BREAKS = b"\r\n"
 
 
@@ -247,7 +247,7 @@ def split_reply(
 
 
 def parse_number(body: str, *, device: str = _DEFAULT_DEVICE) -> float:
-    """Parse a numeric reply, bracketed (``[  12.34]``) or bare (``150.5``).
+    """Parse a numeric reply, bracketed (``[  12.34]``) or bare (``150.5``, ``1e-05``).
 
     Returns
     -------

@@ -120,12 +120,13 @@ def test_split_reply_honours_the_detected_prompt() -> None:
 
 # ------------------------------------------------------------------------------------ parsing
 @pytest.mark.parametrize(("body", "value"), [("[  12.34]", 12.34), ("[ 100]", 100.0), ("150.5", 150.5),
-                                             ("0", 0.0), ("[-0.5]", -0.5), (" [ .25 ] ", 0.25)])
+                                             ("0", 0.0), ("[-0.5]", -0.5), (" [ .25 ] ", 0.25),
+                                             ("1e3", 1000.0)])  # a bare %g number (firmware 1.05)
 def test_parse_number(body: str, value: float) -> None:
     assert parse_number(body) == value
 
 
-@pytest.mark.parametrize("body", ["", "[]", "[ 1", "1]", "abc", "[1,2]", "nan", "inf", "1e3", "[[1]]", "1" * 400])
+@pytest.mark.parametrize("body", ["", "[]", "[ 1", "1]", "abc", "[1,2]", "nan", "inf", "1e", "1e999", "[[1]]", "1" * 400])
 def test_parse_number_rejects(body: str) -> None:
     with pytest.raises(ProtocolError):
         parse_number(body)
