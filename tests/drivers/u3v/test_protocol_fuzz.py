@@ -168,6 +168,41 @@ def test_bootstrap_decoders_return_or_raise_protocol_error(data: bytes) -> None:
             pass
 
 
+sirm_fields = st.tuples(st.integers(0, 2**32 - 1), st.integers(0, 2**32 - 1), st.integers(0, 2**64 - 1),
+                        *[st.integers(0, 2**32 - 1)] * 8)
+hostile_sirms = st.one_of(
+    sirm_fields.map(lambda f: struct.pack("<IIQIIIIIIII", *f)),
+    st.tuples(st.integers(0, 255), st.integers(1, 2**40), st.integers(0, 4096), st.integers(0, 4096)).map(
+        lambda f: struct.pack("<IIQII", f[0] << 24, 0, f[1], f[2], f[3]) + bytes(24)))
+
+
+@fuzz_settings(300)
+@given(data=hostile_sirms)
+def test_a_sirm_that_decodes_gives_transfer_sizes_the_sirm_can_hold_and_bounded_reads(data: bytes) -> None:
+    """The host writes the derived sizes into u32 registers and sizes its bulk reads from them."""
+    try:
+        sirm = bs.decode_sirm(data, DEVICE)
+    except ProtocolError:
+        return
+    stream_transfer = 1 << 20  # the acquisition's largest stream transfer (drivers/u3v/acquisition.py)
+    sizes = bs.compute_transfer_sizes(sirm.required_payload_size, max(sirm.required_leader_size, 52),
+                                      max(sirm.required_trailer_size, 32), sirm.alignment,
+                                      max(stream_transfer, sirm.alignment))
+    fields = (sizes.max_leader_size, sizes.payload_size, sizes.payload_count, sizes.final1_size, sizes.final2_size,
+              sizes.max_trailer_size)
+    assert all(0 <= value <= 0xFFFF_FFFF for value in fields)
+    assert sizes.payload_capacity >= sirm.required_payload_size
+    assembler = BlockAssembler(sizes, sirm.required_payload_size, DEVICE)
+    assert assembler.next_read_size() <= 2 * stream_transfer
+
+
+def test_a_sirm_with_an_absurd_alignment_is_refused() -> None:
+    # regression: SI info 0xFF000000 announced a 2**255-byte alignment; the transfer sizes derived
+    # from it did not fit the u32 SIRM registers (struct.error) and sized a 2**255-byte read buffer
+    with pytest.raises(ProtocolError, match="alignment"):
+        bs.decode_sirm(struct.pack("<IIQII", 0xFF << 24, 0, 4096, 52, 32) + bytes(24), DEVICE)
+
+
 class _Hooks:
     def device_time_ns(self) -> int:
         return 0
