@@ -83,6 +83,18 @@ def test_simulator_acknowledges_parse_back_to_their_fields(status: int, command_
     assert (ack.status, ack.command_id, ack.request_id, ack.scd) == (status, command_id, request_id, scd)
 
 
+@fuzz_settings(300)
+@given(max_ack=st.one_of(st.integers(0, 2**32 - 1), st.sampled_from([0, 12, 16, 1024, 65547, 65548, 2**32 - 1])))
+def test_the_acknowledge_buffer_holds_every_acknowledge_and_no_more(max_ack: int) -> None:
+    size = gencp.ack_buffer_size(max_ack)
+    assert size <= gencp.HEADER_SIZE + 0xFFFF  # a 4 GiB SBRM length field must not size a 4 GiB read
+    assert size == min(max_ack, gencp.HEADER_SIZE + 0xFFFF)  # ... and every acknowledge still fits
+    try:
+        assert gencp.HEADER_SIZE + gencp.max_read_chunk(max_ack) <= size
+    except ValueError:
+        assert max_ack < gencp.HEADER_SIZE + 4
+
+
 def _memory_map() -> RegisterMap:
     """Three read/write cells and a read-only one, with a gap: 0x100 (4 B), 0x104 (8 B), 0x10C RO, 0x200."""
     cells: dict[int, bytearray] = {0x100: bytearray(4), 0x104: bytearray(8), 0x10C: bytearray(b"ROCELL!!"),
