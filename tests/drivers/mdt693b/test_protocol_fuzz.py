@@ -17,7 +17,8 @@ from fuzz import fuzz_settings
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wavestack.drivers.errors import ProtocolError
+from wavestack.drivers.errors import LimitError, ProtocolError
+from wavestack.drivers.mdt693b.limits import _effective_limits, _on_wire
 from wavestack.drivers.mdt693b.command_sets import A_COMMANDS, B_COMMANDS, parse_compatibility_mode
 from wavestack.drivers.mdt693b.protocol import (encode_command, encode_query, encode_set_voltage, parse_id,
                                                 parse_number, parse_vlimit, split_reply)
@@ -173,3 +174,37 @@ def test_every_simulator_answer_to_a_command_line_is_one_reply_the_driver_cuts(c
     answer = device.feed(line + b"\r")
     reply, rest = split_reply(answer, echo_of=line if echo else None, expect_body=False, prompts=b">")
     assert reply is not None and rest == b"", answer
+
+
+# ------------------------------------------------------------------ limits: what goes on the wire
+limit_volts = st.one_of(st.floats(0.0, 150.0), st.integers(0, 15000).map(lambda c: c / 100),
+                        st.integers(0, 150000).map(lambda m: m / 1000))
+
+
+@fuzz_settings(300)
+@given(device_min=limit_volts, device_max=limit_volts, software=st.tuples(limit_volts, limit_volts),
+       vlimit=st.sampled_from([75.0, 100.0, 150.0]), fraction=st.floats(0.0, 1.0))
+def test_a_setpoint_inside_the_limits_goes_on_the_wire_inside_them(device_min: float, device_max: float,
+                                                                   software: tuple[float, float], vlimit: float,
+                                                                   fraction: float) -> None:
+    """Limits read from the device (``xmin?``, ``xmax?``, ``vlimit?``): the two-decimal wire value stays inside."""
+    try:
+        limits = _effective_limits("MDT693B", "x", software_min_v=min(software), software_max_v=max(software),
+                                   device_min_v=device_min, device_max_v=device_max, vlimit_v=vlimit)
+    except LimitError:
+        return
+    requested = limits.min_v + fraction * (limits.max_v - limits.min_v)
+    for volts in (requested, limits.min_v, limits.max_v):
+        wire = _on_wire(volts, limits)
+        assert limits.min_v <= wire <= limits.max_v
+        assert encode_set_voltage("x", wire) == f"xvoltage={wire:.2f}\r".encode()
+        assert float(f"{wire:.2f}") == wire  # what the controller parses is exactly the value checked
+        assert abs(wire - volts) <= 0.01 + 1e-9
+
+
+def test_a_range_narrower_than_the_wire_resolution_is_refused() -> None:
+    # regression: device limits [12.343, 12.347] V hold no two-decimal voltage; a setpoint of 12.345 V
+    # went out as 12.35 V (or 12.34 V), outside the limits the driver had just checked
+    with pytest.raises(LimitError, match="two-decimal"):
+        _effective_limits("MDT693B", "x", software_min_v=0.0, software_max_v=150.0, device_min_v=12.343,
+                          device_max_v=12.347, vlimit_v=150.0)

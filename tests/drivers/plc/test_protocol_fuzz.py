@@ -156,8 +156,10 @@ def _layouts(n_terms: int, orders_: tuple[str, str, str], single_write: int,
     driver = RegisterMap.build(unit_id=1, word_order="ABCD", self_check_register=0, self_check_value=12345.678,
                                heartbeat_register=10, rearm_register=11, status_register=20,
                                command_block=(100, count), output_block=(200, count), read_function=read_function,
-                               single_write_function=single_write, self_check_word_order=self_check_order,  # type: ignore[arg-type]
-                               command_word_order=command_order, output_word_order=output_order)  # type: ignore[arg-type]
+                               single_write_function=single_write,  # type: ignore[arg-type]
+                               self_check_word_order=self_check_order,  # type: ignore[arg-type]
+                               command_word_order=command_order,  # type: ignore[arg-type]
+                               output_word_order=output_order)  # type: ignore[arg-type]
     sim = PlcSimLayout(unit_id=1, self_check_register=0, self_check_value=12345.678,
                        self_check_word_order=self_check_order, heartbeat_register=10, rearm_register=11,
                        status_register=20, command_block=(100, count), output_block=(200, count),

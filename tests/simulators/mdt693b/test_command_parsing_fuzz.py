@@ -19,7 +19,8 @@ MODELS = st.sampled_from(["MDT693B", "MDT694B", "MDT693A"])
 
 
 def _device(model: str, echo: bool, compatibility: bool = False) -> MDT693BDevice:
-    return MDT693BDevice(MDT693BPersonality(model=model, echo=echo, compatibility_mode=compatibility))  # type: ignore[arg-type]
+    personality = MDT693BPersonality(model=model, echo=echo, compatibility_mode=compatibility)  # type: ignore[arg-type]
+    return MDT693BDevice(personality)
 
 
 @fuzz_settings(300)
