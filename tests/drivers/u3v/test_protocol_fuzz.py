@@ -65,7 +65,8 @@ def test_acknowledge_parser_returns_or_raises_protocol_error(packet: bytes) -> N
         ack = gencp.parse_acknowledge(packet, DEVICE)
     except ProtocolError:
         return
-    assert len(ack.scd) == len(packet) - gencp.HEADER_SIZE
+    assert len(ack.scd) == len(packet) - gencp.HEADER_SIZE == struct.unpack_from("<H", packet, 8)[0]
+    assert struct.unpack_from("<I", packet)[0] == gencp.PREFIX
     for reader in (gencp.pending_timeout_ms, gencp.bytes_written):
         try:
             assert 0 <= reader(ack, DEVICE) <= 0xFFFF
@@ -372,21 +373,36 @@ valid_trailers = st.builds(sim_stream.encode_trailer, st.integers(0, 2**64 - 1),
 @fuzz_settings(300)
 @given(leader_bytes=st.one_of(st.binary(max_size=80), valid_leaders.flatmap(_mutations)),
        trailer_bytes=st.one_of(st.binary(max_size=48), valid_trailers.flatmap(_mutations)),
-       received=st.integers(0, 2**20), limit=st.integers(0, 2**20), payload=st.binary(max_size=64))
-def test_block_parts_return_or_raise_protocol_error_without_large_allocations(
-        leader_bytes: bytes, trailer_bytes: bytes, received: int, limit: int, payload: bytes) -> None:
-    tracemalloc.start()
+       received=st.integers(0, 2**20), limit=st.integers(0, 2**20))
+def test_leaders_and_trailers_return_or_raise_protocol_error(leader_bytes: bytes, trailer_bytes: bytes,
+                                                            received: int, limit: int) -> None:
     try:
         leader = parse_leader(leader_bytes, DEVICE)
         trailer = parse_trailer(trailer_bytes, DEVICE)
-        check_block(leader, trailer, received, limit, DEVICE)
-        decode_pixels(payload, leader, DEVICE)
+        assert check_block(leader, trailer, received, limit, DEVICE) <= min(received, limit)
     except ProtocolError:
         pass
+
+
+@fuzz_settings(300)
+@given(leader_bytes=valid_leaders.flatmap(_mutations), payload=st.binary(max_size=600))
+def test_payload_decoding_returns_an_image_or_raises_protocol_error_without_large_allocations(
+        leader_bytes: bytes, payload: bytes) -> None:
+    try:
+        leader = parse_leader(leader_bytes, DEVICE)
+    except ProtocolError:
+        return
+    tracemalloc.start()
+    try:
+        pixels = decode_pixels(payload, leader, DEVICE)
+    except ProtocolError:
+        pixels = None
     finally:
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
-    assert peak < 1 << 20  # a 4-billion-pixel leader must not allocate for its image
+    assert peak < 1 << 16  # a 4-billion-pixel leader must not allocate for its image
+    if pixels is not None:
+        assert pixels.shape == (leader.size_y, leader.size_x) and pixels.nbytes <= len(payload)
 
 
 @fuzz_settings(100)
