@@ -138,7 +138,7 @@ def encode_command(command: str) -> bytes:
         Empty, non-ASCII, or containing characters the protocol reserves (CR, LF, ``>``, ``*``, ``!``);
         ``%`` only as the first character (the MDT693A's limit switch query).
     """
-    if not isinstance(command, str) or not _COMMAND.match(command):
+    if not isinstance(command, str) or not _COMMAND.fullmatch(command):  # match's "$" lets a final LF through
         raise ValueError(f"not an MDT693B command: {command!r} (expected printable ASCII such as 'xvoltage?')")
     return command.encode("ascii") + TERMINATOR
 
@@ -262,7 +262,7 @@ def parse_number(body: str, *, device: str = _DEFAULT_DEVICE) -> float:
     match = _NUMBER.match(body) if isinstance(body, str) else None
     text = None if match is None else (match.group("bracketed") if match.group("bracketed") is not None
                                        else match.group("bare"))
-    value = float(text) if text is not None and _FLOAT.match(text) else math.nan
+    value = float(text) if text is not None and _FLOAT.fullmatch(text) else math.nan
     if not math.isfinite(value):  # also catches a digit string too long for a double
         raise ProtocolError(device, f"expected a number such as '[ 12.34]', got {body[:40]!r}")
     return value

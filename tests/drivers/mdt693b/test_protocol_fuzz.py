@@ -83,6 +83,29 @@ def test_reply_body_parsers_return_or_raise_protocol_error(text: str) -> None:
             assert value in (75.0, 100.0, 150.0)
 
 
+@fuzz_settings(300)
+@given(command=st.one_of(st.text(max_size=20), st.text(PRINTABLE, max_size=20).map(lambda t: t + "\n"),
+                         st.sampled_from(["id?", "xvoltage=1.5", "%", "XV12.3"]).flatmap(
+                             lambda t: st.tuples(st.integers(0, len(t)), st.characters()).map(
+                                 lambda p: t[:p[0]] + p[1] + t[p[0]:]))))
+def test_an_encoded_command_is_one_line_of_printable_ascii(command: str) -> None:
+    try:
+        line = encode_command(command)
+    except ValueError:
+        return
+    body = line[:-1]
+    assert line.endswith(b"\r") and body.decode("ascii") == command
+    assert all(32 <= byte < 127 for byte in body) and not any(c in body for c in b">*!%"[:3])
+    assert b"%" not in body[1:]
+
+
+def test_a_command_ending_in_a_line_feed_is_refused() -> None:
+    # regression: the pattern was applied with re.match, whose "$" also matches before a final "\n",
+    # so "id?\n" went out as b"id?\n\r"
+    with pytest.raises(ValueError, match="not an MDT693B command"):
+        encode_command("id?\n")
+
+
 # ---------------------------------------------------------------------------------------------- (b)
 @fuzz_settings(300)
 @given(value=st.floats(-1e12, 1e12), width=st.integers(0, 10), decimals=st.integers(0, 4))
