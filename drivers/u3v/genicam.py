@@ -41,11 +41,11 @@ import math
 import xml.etree.ElementTree as ET
 import zipfile
 import zlib
-from xml.parsers import expat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Literal
+from xml.parsers import expat
 
 from wavestack.drivers.errors import ProtocolError
 
