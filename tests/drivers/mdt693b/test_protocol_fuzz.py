@@ -18,8 +18,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from wavestack.drivers.errors import LimitError, ProtocolError
+from wavestack.drivers.mdt693b.command_sets import (A_COMMANDS, B_COMMANDS, command_set_after_probe,
+                                                    parse_compatibility_mode)
 from wavestack.drivers.mdt693b.limits import _effective_limits, _on_wire
-from wavestack.drivers.mdt693b.command_sets import A_COMMANDS, B_COMMANDS, parse_compatibility_mode
 from wavestack.drivers.mdt693b.protocol import (encode_command, encode_query, encode_set_voltage, parse_id,
                                                 parse_number, parse_vlimit, split_reply)
 from wavestack.simulators.mdt693b.device import MDT693BDevice
@@ -104,6 +105,26 @@ def test_a_command_ending_in_a_line_feed_is_refused() -> None:
     # so "id?\n" went out as b"id?\n\r"
     with pytest.raises(ValueError, match="not an MDT693B command"):
         encode_command("id?\n")
+
+
+@fuzz_settings(300)
+@given(probe=replies, compatibility=st.one_of(st.none(), replies))
+def test_the_command_set_probe_decides_or_asks_or_raises_protocol_error(probe: bytes,
+                                                                       compatibility: bytes | None) -> None:
+    """Any answers to ``echo=0`` and ``cm?``: a command set, None (ask ``cm?``) or ProtocolError."""
+    try:
+        probe_reply = split_reply(probe, echo_of=None, expect_body=False)[0]
+        cm_reply = None if compatibility is None else split_reply(compatibility, echo_of=None, expect_body=True)[0]
+    except ProtocolError:
+        return
+    if probe_reply is None:
+        return
+    try:
+        decided = command_set_after_probe(probe_reply, cm_reply)
+    except ProtocolError:
+        assert cm_reply is not None and probe_reply.prompt == "*"
+        return
+    assert decided in ("mdt693b", "mdt693a") or (decided is None and cm_reply is None and probe_reply.prompt == "*")
 
 
 # ---------------------------------------------------------------------------------------------- (b)
