@@ -63,22 +63,36 @@ def _effective_limits(device: str, axis: str, *, software_min_v: float, software
     Raises
     ------
     LimitError
-        The three ranges leave no usable voltage.
+        The three ranges leave no usable voltage, or none that two decimals (the resolution of a
+        setpoint on the wire) can spell.
     """
     low = max(software_min_v, device_min_v)
     high = min(software_max_v, device_max_v, vlimit_v)
-    if low > high:
-        raise LimitError(device, f"axis {axis} has no usable range: software "
+    if low > high or _wire_at_or_above(low) > high:
+        narrow = "" if low > high else f" with a two-decimal voltage (the wire's resolution) in [{low}, {high}]"
+        raise LimitError(device, f"axis {axis} has no usable range{narrow}: software "
                          f"[{software_min_v:g}, {software_max_v:g}] V, device "
                          f"[{device_min_v:g}, {device_max_v:g}] V, limit switch {vlimit_v:g} V")
     return AxisLimits(low, high, device_min_v, device_max_v, vlimit_v)
+
+
+def _wire_at_or_above(volts: float) -> float:
+    """The smallest voltage with two decimals that is >= ``volts`` (exact despite ``volts * 100`` rounding)."""
+    cents = math.ceil(volts * 100)
+    return (cents - 1) / 100 if (cents - 1) / 100 >= volts else cents / 100
+
+
+def _wire_at_or_below(volts: float) -> float:
+    """The largest voltage with two decimals that is <= ``volts``."""
+    cents = math.floor(volts * 100)
+    return (cents + 1) / 100 if (cents + 1) / 100 <= volts else cents / 100
 
 
 def _on_wire(volts: float, limits: AxisLimits) -> float:
     """The voltage as sent (two decimals), kept inside ``limits`` when rounding would leave them."""
     wire = round(volts, 2)
     if wire > limits.max_v:
-        wire = math.floor(limits.max_v * 100) / 100
+        wire = _wire_at_or_below(limits.max_v)
     if wire < limits.min_v:
-        wire = math.ceil(limits.min_v * 100) / 100
+        wire = _wire_at_or_above(limits.min_v)
     return wire

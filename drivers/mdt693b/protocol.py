@@ -17,7 +17,7 @@ Where firmware versions differ this module accepts all the variants we found doc
   reply as well as after it (``b"vlimit?\\r*[ 100]\\r*"``), so when a body is expected, leading prompt
   characters are skipped (:func:`split_reply` with ``expect_body=True``).
 * Numbers: bracketed (``[ 100]``, ``[  24.8]``, ``[  0.24]``) or bare (``0``, ``150.5``, as
-  ``xmin?``/``xmax?`` answer on firmware 1.05).
+  ``xmin?``/``xmax?`` answer on firmware 1.05; that is C's ``%g``, so ``1e-05`` is read too).
 * ``vlimit?``: the switch voltage (``[ 100]``) or, as the built-in help text words it, the switch
   position (0 = 75 V, 1 = 100 V, 2 = 150 V).
 * Errors: firmware 1.10 answers an unknown command with ``CMD_NOT_DEFINED`` (and a bad argument with
@@ -59,7 +59,7 @@ MAX_REPLY_BYTES = 4096
 _DEFAULT_DEVICE = "MDT693B"
 _COMMAND = re.compile(r"^[A-Za-z?%][A-Za-z0-9?=.,+\- ]*$")
 _NUMBER = re.compile(r"^\s*(?:\[\s*(?P<bracketed>[^\[\]]*?)\s*\]|(?P<bare>[^\[\]]*?))\s*$")
-_FLOAT = re.compile(r"^[+-]?(?:\d+(?:\.\d*)?|\.\d+)$")
+_FLOAT = re.compile(r"^[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?$", re.ASCII)  # a C "%g" may use an exponent
 _LINE_BREAKS = b"\r\n"
 
 
@@ -138,7 +138,7 @@ def encode_command(command: str) -> bytes:
         Empty, non-ASCII, or containing characters the protocol reserves (CR, LF, ``>``, ``*``, ``!``);
         ``%`` only as the first character (the MDT693A's limit switch query).
     """
-    if not isinstance(command, str) or not _COMMAND.match(command):
+    if not isinstance(command, str) or not _COMMAND.fullmatch(command):  # match's "$" lets a final LF through
         raise ValueError(f"not an MDT693B command: {command!r} (expected printable ASCII such as 'xvoltage?')")
     return command.encode("ascii") + TERMINATOR
 
@@ -247,7 +247,7 @@ def split_reply(
 
 
 def parse_number(body: str, *, device: str = _DEFAULT_DEVICE) -> float:
-    """Parse a numeric reply, bracketed (``[  12.34]``) or bare (``150.5``).
+    """Parse a numeric reply, bracketed (``[  12.34]``) or bare (``150.5``, ``1e-05``).
 
     Returns
     -------
@@ -262,7 +262,7 @@ def parse_number(body: str, *, device: str = _DEFAULT_DEVICE) -> float:
     match = _NUMBER.match(body) if isinstance(body, str) else None
     text = None if match is None else (match.group("bracketed") if match.group("bracketed") is not None
                                        else match.group("bare"))
-    value = float(text) if text is not None and _FLOAT.match(text) else math.nan
+    value = float(text) if text is not None and _FLOAT.fullmatch(text) else math.nan
     if not math.isfinite(value):  # also catches a digit string too long for a double
         raise ProtocolError(device, f"expected a number such as '[ 12.34]', got {body[:40]!r}")
     return value

@@ -3,8 +3,9 @@
 Every address the driver touches is named here, as frozen values built from the configuration, so
 a register map is checked once (no overlaps, counts that fit one Modbus request, function codes that
 make sense) and the driver never writes a literal address. The host may write only three places:
-the heartbeat register, the re-arm register and the command block, each with its configured
-function code; :meth:`RegisterMap.check_write` refuses anything else before a byte goes on the wire.
+the heartbeat register, the re-arm register and the command block (whole, in one request), each
+with its configured function code; :meth:`RegisterMap.check_write` refuses anything else before a
+byte goes on the wire.
 
 Layout of the blocks (``n`` = number of removal terms, ``(count - 2) / 2``):
 
@@ -30,7 +31,7 @@ from numpy.typing import ArrayLike
 
 from wavestack.drivers._checks import is_integral_in
 from wavestack.drivers.errors import LimitError
-from wavestack.drivers.plc.codec import WORD_ORDERS, WordOrder, encode_float32_array
+from wavestack.drivers.plc.codec import WORD_ORDERS, WordOrder, encode_float32_array, round_to_float32
 
 __all__ = [
     "COMMAND_HEADER_COUNT",
@@ -148,6 +149,11 @@ class RegisterMap:
             raise ValueError(f"unit_id must be 0..255, got {self.unit_id}")
         if not math.isfinite(self.self_check_value):
             raise ValueError(f"self_check_value must be finite, got {self.self_check_value}")
+        try:
+            round_to_float32(self.self_check_value)
+        except ValueError:
+            raise ValueError(f"self_check_value must lie within the float32 range (|x| <= 3.4e38) that the "
+                             f"self-check block holds, got {self.self_check_value!r}") from None
         expected = {"self_check": 2, "heartbeat": 1, "rearm": 1, "status": STATUS_COUNT}
         for block in self.blocks():
             if not (0 <= block.start and block.stop <= 65536 and block.count >= 1):
@@ -285,8 +291,9 @@ class RegisterMap:
         Raises
         ------
         WriteRefused
-            The write is not entirely inside one writable block, or does not use that block's
-            configured function code (FC6 can only write one register).
+            The write is not entirely inside one writable block, does not use that block's
+            configured function code (FC6 can only write one register), or covers only part of the
+            command block (the PLC refuses it: a new id would start a command from stale registers).
         """
         allowed = ", ".join(b.describe() for b in self.blocks() if b.writable)
         what = f"register {address}" if count == 1 else f"registers {address}-{address + count - 1}"
@@ -295,6 +302,10 @@ class RegisterMap:
                 if function_code != block.write_function or (function_code == 6 and count != 1):
                     raise WriteRefused(self.device, f"refusing to write {what} with FC{function_code}: the "
                                        f"{block.name} block is written with FC{block.write_function} only")
+                if block is self.command and (address, count) != (block.start, block.count):
+                    raise WriteRefused(self.device, f"refusing to write {what}: the command block "
+                                       f"(registers {block.start}-{block.stop - 1}) is written whole, in one "
+                                       f"FC{block.write_function} request")
                 return block
         raise WriteRefused(self.device, f"refusing to write {what} (FC{function_code}): the host may write only "
                            f"{allowed}")

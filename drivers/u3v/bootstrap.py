@@ -37,6 +37,12 @@ SIRM_FINAL_TRANSFER1_SIZE = 0x24
 SIRM_FINAL_TRANSFER2_SIZE = 0x28
 SIRM_MAX_TRAILER_SIZE = 0x2C
 SI_CONTROL_STREAM_ENABLE = 0x1
+#: Largest SIRM values the host accepts (the transfer sizes it derives must fit the SIRM's u32 fields,
+#: and the read buffers they size must stay reasonable): 1 MiB alignment, leader and trailer; a
+#: payload that 2**32 - 1 transfers of 1 MiB carry.
+SIRM_MAX_ALIGNMENT = 1 << 20
+SIRM_MAX_LEADER_OR_TRAILER = 1 << 20
+SIRM_MAX_PAYLOAD = 0xFFFF_FFFF << 20
 
 # Manifest table: u64 entry count, then 64-byte entries.
 MANIFEST_COUNT_SIZE = 8
@@ -226,10 +232,18 @@ def decode_sirm(data: bytes, device: str) -> Sirm:
     Raises
     ------
     ProtocolError
-        Fewer than ``SIRM_SIZE`` bytes.
+        Fewer than ``SIRM_SIZE`` bytes, or a required size or alignment beyond the ``SIRM_MAX_*``
+        bounds (a 2**255-byte alignment would size the stream's read buffers).
     """
     data = _require(data, SIRM_SIZE, "SIRM", device)
-    return Sirm(*_SIRM.unpack_from(data, 0))
+    sirm = Sirm(*_SIRM.unpack_from(data, 0))
+    for what, value, bound in (("transfer alignment", sirm.alignment, SIRM_MAX_ALIGNMENT),
+                               ("required leader size", sirm.required_leader_size, SIRM_MAX_LEADER_OR_TRAILER),
+                               ("required trailer size", sirm.required_trailer_size, SIRM_MAX_LEADER_OR_TRAILER),
+                               ("required payload size", sirm.required_payload_size, SIRM_MAX_PAYLOAD)):
+        if value > bound:
+            raise ProtocolError(device, f"SIRM {what} is {value} B; expected at most {bound} B")
+    return sirm
 
 
 @dataclass(frozen=True)

@@ -204,6 +204,15 @@ def max_write_chunk(max_cmd_transfer_length: int) -> int:
     return chunk
 
 
+def ack_buffer_size(max_ack_transfer_length: int) -> int:
+    """Bytes to read for one acknowledge: the SBRM's maximum acknowledge transfer length, capped at
+    the largest packet GenCP can frame (12-byte header + 65535 SCD bytes).
+
+    The SBRM field is a u32: a device announcing 4 GiB must not make the host allocate 4 GiB per read.
+    """
+    return max(0, min(max_ack_transfer_length, HEADER_SIZE + _MAX_U16))
+
+
 def parse_acknowledge(packet: bytes, device: str) -> Acknowledge:
     """Parse one acknowledge packet read from the control IN endpoint.
 

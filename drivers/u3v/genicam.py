@@ -5,11 +5,12 @@ naming the feature):
 
 * Root ``RegisterDescription`` in a GenApi namespace (``http://www.genicam.org/GenApi/...``,
   normally ``Version_1_1``) or in no namespace. Nodes are its children or children of ``Group``.
-* ``Integer`` with one ``pValue`` -> ``IntReg``; optional constant ``Min``/``Max``.
-* ``Float`` with one ``pValue`` -> ``FloatReg``; optional constant ``Min``/``Max``.
-* ``Enumeration`` with ``EnumEntry`` children (``Name`` attribute, integer ``Value``) and one
-  ``pValue`` -> ``IntReg``.
-* ``Command`` with one ``pValue`` -> ``IntReg`` and a constant ``CommandValue``.
+* ``Integer`` with one ``pValue`` -> ``IntReg``; optional constant ``Min``/``Max`` (finite,
+  ``Min <= Max``).
+* ``Float`` with one ``pValue`` -> ``FloatReg``; optional constant ``Min``/``Max`` (likewise).
+* ``Enumeration`` with ``EnumEntry`` children (``Name`` attribute, integer ``Value`` that fits the
+  register unsigned) and one ``pValue`` -> ``IntReg``.
+* ``Command`` with one ``pValue`` -> ``IntReg`` and a constant ``CommandValue`` that fits the register.
 * ``IntReg``: one constant ``Address`` (no ``pAddress``, ``IntSwissKnife`` or ``pIndex``),
   ``Length`` 4 or 8, ``AccessMode`` RO/RW/WO (default RO), ``Endianess`` LittleEndian (default),
   ``Sign`` Unsigned (default).
@@ -24,8 +25,8 @@ left out otherwise: a camera that builds them from nodes outside the subset stil
 
 Presentation elements (``ToolTip``, ``DisplayName``, ``Visibility``, ``pInvalidator``, ...) are
 ignored. Integers are decimal or ``0x`` hexadecimal. The XML comes as plain bytes or as a ZIP
-holding exactly one ``.xml`` file. Documents with a DTD are refused (``xml.etree`` never fetches
-external entities; refusing DTDs also rules out entity expansion).
+holding exactly one ``.xml`` file. Documents with a DTD are refused, in any encoding expat reads
+(``xml.etree`` never fetches external entities; refusing DTDs also rules out entity expansion).
 
 Reference: EMVA GenICam Standard, GenApi schema 1.1 (node types IntReg, FloatReg, StringReg,
 Integer, Float, Enumeration, Command); GenICam Standard Features Naming Convention (SFNC 2.6) for
@@ -36,6 +37,7 @@ from __future__ import annotations
 
 import io
 import logging
+import math
 import xml.etree.ElementTree as ET
 import zipfile
 import zlib
@@ -43,6 +45,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Literal
+from xml.parsers import expat
 
 from wavestack.drivers.errors import ProtocolError
 
@@ -210,6 +213,27 @@ def extract_xml(data: bytes, device: str, *, zipped: bool | None = None) -> byte
     return xml
 
 
+class _DtdFound(Exception):
+    """Raised from the expat handlers when a document declares a DTD or an entity."""
+
+
+def _refuse_dtd(xml: bytes, device: str) -> None:
+    """Refuse a DTD or entity declaration in any encoding expat decodes (a byte search misses UTF-16);
+    this pass stops at the first declaration, before any entity is expanded."""
+    parser = expat.ParserCreate()
+
+    def found(*_: object) -> None:
+        raise _DtdFound
+
+    parser.StartDoctypeDeclHandler = parser.EntityDeclHandler = found
+    try:
+        parser.Parse(xml, True)
+    except _DtdFound:
+        raise ProtocolError(device, "GenICam XML with a DTD or entity declarations is refused") from None
+    except (expat.ExpatError, ValueError, LookupError, UnicodeError):
+        pass  # not well-formed: the tree parser reports it with its position
+
+
 def _local(tag: object) -> str:
     text = tag if isinstance(tag, str) else ""
     return text.rsplit("}", 1)[-1]
@@ -316,7 +340,24 @@ class _Resolver:
     def _limit(self, feature: str, node: ET.Element, tag: str) -> float | None:
         if not self._children(feature, node, tag):
             return None
-        return _parse_float(self._one_text(feature, node, tag), f"{feature} {tag}", self._device)
+        value = _parse_float(self._one_text(feature, node, tag), f"{feature} {tag}", self._device)
+        if not math.isfinite(value):  # a NaN limit would compare false and let every value through
+            raise self._fail(feature, f"{tag} {value!r}; expected a finite number")
+        return value
+
+    def _limits(self, feature: str, node: ET.Element) -> tuple[float | None, float | None]:
+        low, high = self._limit(feature, node, "Min"), self._limit(feature, node, "Max")
+        if low is not None and high is not None and low > high:
+            raise self._fail(feature, f"Min {low!r} exceeds Max {high!r}; expected Min <= Max")
+        return low, high
+
+    def _register_value(self, feature: str, text: str, what: str, register: Register) -> int:
+        """An integer from the XML that is written to ``register``: it must fit its unsigned width."""
+        value = _parse_int(text, f"{feature} {what}", self._device)
+        if not 0 <= value < 1 << (8 * register.length):
+            raise self._fail(feature, f"{what} {value} does not fit the {register.length}-byte unsigned register; "
+                                      f"expected 0..{(1 << (8 * register.length)) - 1}")
+        return value
 
     def _string(self, feature: str, node: ET.Element) -> Feature:
         self._refuse(feature, node, _ADDRESS_ALTERNATIVES)
@@ -341,19 +382,19 @@ class _Resolver:
         register = self._register(feature, self._one_text(feature, node, "pValue"), want_float=tag == "Float")
         if tag in ("Integer", "Float"):
             kind: FeatureKind = "integer" if tag == "Integer" else "float"
-            return Feature(feature, kind, register, minimum=self._limit(feature, node, "Min"),
-                           maximum=self._limit(feature, node, "Max"))
+            low, high = self._limits(feature, node)
+            return Feature(feature, kind, register, minimum=low, maximum=high)
         if tag == "Command":
-            value = _parse_int(self._one_text(feature, node, "CommandValue"), f"{feature} CommandValue",
-                               self._device)
+            value = self._register_value(feature, self._one_text(feature, node, "CommandValue"), "CommandValue",
+                                         register)
             return Feature(feature, "command", register, command_value=value)
         entries: dict[str, int] = {}
         for entry in self._children(feature, node, "EnumEntry"):
             entry_name = entry.get("Name")
             if not entry_name or entry_name in entries:
                 raise self._fail(feature, f"EnumEntry name {entry_name!r} is missing or repeated")
-            entries[entry_name] = _parse_int(self._one_text(feature, entry, "Value"),
-                                             f"{feature} entry {entry_name} Value", self._device)
+            entries[entry_name] = self._register_value(feature, self._one_text(feature, entry, "Value"),
+                                                       f"entry {entry_name} Value", register)
         if not entries:
             raise self._fail(feature, "enumeration has no EnumEntry")
         return Feature(feature, "enumeration", register, entries=entries)
@@ -388,8 +429,7 @@ def parse_genicam(data: bytes, device: str, *, zipped: bool | None = None,
         feature outside the supported subset (the message names the feature).
     """
     xml = extract_xml(data, device, zipped=zipped)
-    if b"<!DOCTYPE" in xml.upper() or b"<!ENTITY" in xml.upper():
-        raise ProtocolError(device, "GenICam XML with a DTD or entity declarations is refused")
+    _refuse_dtd(xml, device)
     try:
         root = ET.fromstring(xml)
     except (ET.ParseError, ValueError, LookupError, UnicodeError) as exc:

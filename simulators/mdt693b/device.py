@@ -10,6 +10,8 @@ Behaviour modelled (firmware 1.10 unless noted):
 
 * A command ends with CR; LF is ignored; commands are case-insensitive. A bare CR answers with the
   prompt alone (an assumption; not documented).
+* A line longer than 256 bytes is refused (``CMD_NOT_DEFINED``, ``!`` in the MDT693A set), not run
+  cut short (an assumption: the firmware's buffer size is not documented).
 * Echo on (the power-on default): the command line and a CR come back before the reply.
 * A query answers ``<body>\\r<prompt>``; a set command answers the prompt alone. With the ``*``
   prompt (firmware 1.05) a query's body is preceded by a ``*`` too, as logs of that firmware show.
@@ -34,7 +36,7 @@ import threading
 from collections import deque
 from collections.abc import Callable
 
-from wavestack.simulators.mdt693b.compatibility import MDT693ACommands, frame_mdt693a
+from wavestack.simulators.mdt693b.compatibility import REFUSED, MDT693ACommands, frame_mdt693a
 from wavestack.simulators.mdt693b.personality import AxisState, MDT693BFaults, MDT693BPersonality
 
 logger = logging.getLogger(__name__)
@@ -81,6 +83,7 @@ class MDT693BDevice(MDT693ACommands):
         self._compatibility = self.personality.compatibility_mode or self.personality.model == "MDT693A"
         self._axes = {name: AxisState() for name in self.personality.axes}
         self._line = bytearray()
+        self._line_too_long = False  # bytes of the present line were dropped beyond _MAX_LINE
         self._received = bytearray()
         self._commands: deque[str] = deque(maxlen=COMMAND_HISTORY)
         self.commands_received = 0  # every command line ever, also those the history forgot
@@ -148,9 +151,12 @@ class MDT693BDevice(MDT693ACommands):
                 if byte != 0x0D:
                     if len(self._line) < _MAX_LINE:
                         self._line.append(byte)
+                    else:
+                        self._line_too_long = True
                     continue
                 line, self._line = bytes(self._line), bytearray()
-                out += self._answer(line, changes)
+                too_long, self._line_too_long = self._line_too_long, False
+                out += self._answer(line, changes, too_long=too_long)
         for axis, volts in changes:
             if self.on_voltage_change is not None:
                 self.on_voltage_change(axis, volts)
@@ -172,7 +178,8 @@ class MDT693BDevice(MDT693ACommands):
         except KeyError:
             raise ValueError(f"{self.personality.model} has axes {tuple(self._axes)}, not {axis!r}") from None
 
-    def _answer(self, line: bytes, changes: list[tuple[str, float]]) -> bytes:
+    def _answer(self, line: bytes, changes: list[tuple[str, float]], *, too_long: bool = False) -> bytes:
+        """The bytes answering one line; a line cut at ``_MAX_LINE`` is refused, never run truncated."""
         text = line.decode("latin-1")
         self._commands.append(text)
         self.commands_received += 1
@@ -180,13 +187,13 @@ class MDT693BDevice(MDT693ACommands):
             return b""
         if self._compatibility:
             echo = line.lower() + b"\r" if self._echo else b""  # the MDT693A echoes in lower case
-            outcome = self._execute_mdt693a(text.strip().lower(), changes)
+            outcome = REFUSED if too_long else self._execute_mdt693a(text.strip().lower(), changes)
             prompt = b"*" if self._compatibility else self.personality.prompt.encode()  # cm=0 switched it
             if self.faults.garbage:
                 return echo + self._noise() + prompt
             return echo + frame_mdt693a(outcome, prompt)
         echo = line + b"\r" if self._echo else b""
-        body = self._execute(text.strip().lower(), changes)
+        body = "CMD_NOT_DEFINED" if too_long else self._execute(text.strip().lower(), changes)
         prompt = b"*" if self._compatibility else self.personality.prompt.encode()  # cm=1 switched it
         if self.faults.garbage:
             return echo + self._noise() + prompt

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from fuzz import fuzz_settings
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -73,6 +74,7 @@ def test_optional_echo_is_skipped_without_regard_to_case(received: bytes, body: 
     assert reply == Reply(body, "*") and rest == b""
 
 
+@fuzz_settings(100)
 @given(st.integers(min_value=0, max_value=15), st.booleans())
 def test_optional_echo_in_any_two_pieces(cut: int, echo: bool) -> None:
     received = (b"xv1.25\r" if echo else b"") + b"*"

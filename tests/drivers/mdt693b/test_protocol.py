@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import given, settings
+from fuzz import fuzz_settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from wavestack.drivers import ProtocolError
@@ -120,12 +121,13 @@ def test_split_reply_honours_the_detected_prompt() -> None:
 
 # ------------------------------------------------------------------------------------ parsing
 @pytest.mark.parametrize(("body", "value"), [("[  12.34]", 12.34), ("[ 100]", 100.0), ("150.5", 150.5),
-                                             ("0", 0.0), ("[-0.5]", -0.5), (" [ .25 ] ", 0.25)])
+                                             ("0", 0.0), ("[-0.5]", -0.5), (" [ .25 ] ", 0.25),
+                                             ("1e3", 1000.0)])  # a bare %g number (firmware 1.05)
 def test_parse_number(body: str, value: float) -> None:
     assert parse_number(body) == value
 
 
-@pytest.mark.parametrize("body", ["", "[]", "[ 1", "1]", "abc", "[1,2]", "nan", "inf", "1e3", "[[1]]", "1" * 400])
+@pytest.mark.parametrize("body", ["", "[]", "[ 1", "1]", "abc", "[1,2]", "nan", "inf", "1e", "1e999", "[[1]]", "1" * 400])
 def test_parse_number_rejects(body: str) -> None:
     with pytest.raises(ProtocolError):
         parse_number(body)
@@ -163,7 +165,7 @@ def test_parse_id_without_model_line() -> None:
 
 
 # ------------------------------------------------------------------------------- properties
-@settings(max_examples=300, deadline=None)
+@fuzz_settings(300)
 @given(data=st.binary(max_size=200), echo=st.sampled_from([None, b"xvoltage?", b"id?"]),
        expect_body=st.booleans(), prompts=st.sampled_from([PROMPTS, b">", b"*"]))
 def test_split_reply_on_arbitrary_bytes(data: bytes, echo: bytes | None, expect_body: bool, prompts: bytes) -> None:
@@ -184,7 +186,7 @@ def test_split_reply_on_arbitrary_bytes(data: bytes, echo: bytes | None, expect_
             pass
 
 
-@settings(max_examples=300, deadline=None)
+@fuzz_settings(300)
 @given(text=st.text(max_size=60) | st.from_regex(r"\[ *-?[0-9]{1,4}(\.[0-9]{0,3})?\]", fullmatch=True))
 def test_parsers_on_arbitrary_text(text: str) -> None:
     for parse in (parse_number, parse_vlimit):
@@ -200,7 +202,7 @@ def test_parsers_on_arbitrary_text(text: str) -> None:
     assert identity.model and identity.raw == text
 
 
-@settings(max_examples=200, deadline=None)
+@fuzz_settings(200)
 @given(volts=st.floats(min_value=0.0, max_value=150.0, allow_nan=False))
 def test_set_voltage_encoding_round_trips_within_the_wire_resolution(volts: float) -> None:
     wire = encode_set_voltage("x", volts)

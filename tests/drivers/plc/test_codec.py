@@ -7,7 +7,8 @@ import struct
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from fuzz import fuzz_settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from wavestack.drivers.plc import (
@@ -45,7 +46,7 @@ def test_the_four_orders_give_four_different_register_pairs() -> None:
     assert len(pairs) == 4
 
 
-@settings(max_examples=300, deadline=None)
+@fuzz_settings(300)
 @given(value=float32s, order=orders)
 def test_float32_round_trips_in_every_order(value: float, order: str) -> None:
     regs = encode_float32(value, order)  # type: ignore[arg-type]
@@ -53,7 +54,7 @@ def test_float32_round_trips_in_every_order(value: float, order: str) -> None:
     assert decode_float32(regs, order) == value  # type: ignore[arg-type]  # float32 values are exact
 
 
-@settings(max_examples=300, deadline=None)
+@fuzz_settings(300)
 @given(first=registers, second=registers, order=orders)
 def test_every_register_pair_decodes_and_re_encodes_bit_exactly(first: int, second: int, order: str) -> None:
     value = decode_float32([first, second], order)  # type: ignore[arg-type]
@@ -63,14 +64,14 @@ def test_every_register_pair_decodes_and_re_encodes_bit_exactly(first: int, seco
         assert encode_float32(value, order) == (first, second)  # type: ignore[arg-type]
 
 
-@settings(max_examples=300, deadline=None)
+@fuzz_settings(300)
 @given(value=float32s, order=orders)
 def test_driver_codec_agrees_with_the_simulators_independent_one(value: float, order: str) -> None:
     assert list(encode_float32(value, order)) == float_to_words(value, order)  # type: ignore[arg-type]
     assert words_to_float(list(encode_float32(value, order)), order) == value  # type: ignore[arg-type]
 
 
-@settings(max_examples=300, deadline=None)
+@fuzz_settings(300)
 @given(value=st.integers(min_value=0, max_value=2**32 - 1), order=orders)
 def test_uint32_round_trips_and_follows_the_table(value: int, order: str) -> None:
     regs = encode_uint32(value, order)  # type: ignore[arg-type]
@@ -78,7 +79,7 @@ def test_uint32_round_trips_and_follows_the_table(value: int, order: str) -> Non
     assert decode_uint32(regs, order) == value  # type: ignore[arg-type]
 
 
-@settings(max_examples=100, deadline=None)
+@fuzz_settings(100)
 @given(values=st.lists(float32s, min_size=1, max_size=20), order=orders)
 def test_arrays_round_trip(values: list[float], order: str) -> None:
     regs = encode_float32_array(values, order)  # type: ignore[arg-type]

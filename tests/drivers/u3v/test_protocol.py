@@ -8,7 +8,8 @@ import zipfile
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from fuzz import fuzz_settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from wavestack.drivers import ProtocolError
@@ -146,7 +147,7 @@ def test_transfer_sizes_example() -> None:
     assert (sizes.max_leader_size, sizes.max_trailer_size) == (64, 64)
 
 
-@settings(max_examples=200, deadline=None)
+@fuzz_settings(200)
 @given(payload=st.integers(0, 10**8), log2_alignment=st.integers(0, 12), max_factor=st.integers(1, 4096))
 def test_transfer_sizes_cover_the_payload(payload: int, log2_alignment: int, max_factor: int) -> None:
     alignment = 1 << log2_alignment
@@ -391,7 +392,7 @@ def only_protocol_errors(call) -> None:  # type: ignore[no-untyped-def]
         pass
 
 
-@settings(max_examples=300, deadline=None)
+@fuzz_settings(300)
 @given(data=st.binary(max_size=600))
 def test_fuzz_byte_parsers(data: bytes) -> None:
     for parser in (gencp.parse_acknowledge, bs.decode_abrm, bs.decode_sbrm, bs.decode_sirm, bs.decode_manifest_count,
@@ -399,7 +400,7 @@ def test_fuzz_byte_parsers(data: bytes) -> None:
         only_protocol_errors(lambda: parser(data, DEV))  # noqa: B023 - called at once
 
 
-@settings(max_examples=200, deadline=None)
+@fuzz_settings(200)
 @given(data=st.one_of(st.binary(max_size=400), st.text(max_size=300).map(str.encode),
                       st.binary(max_size=200).map(lambda b: b"PK\x03\x04" + b)))
 def test_fuzz_genicam(data: bytes) -> None:
@@ -407,7 +408,7 @@ def test_fuzz_genicam(data: bytes) -> None:
     only_protocol_errors(lambda: parse_genicam(data, DEV, zipped=True))
 
 
-@settings(max_examples=100, deadline=None)
+@fuzz_settings(100)
 @given(header=st.binary(min_size=52, max_size=52), payload=st.binary(max_size=300))
 def test_fuzz_decode_pixels(header: bytes, payload: bytes) -> None:
     forged = struct.pack("<I", 0x4C563355) + header[4:6] + struct.pack("<H", 52) + header[8:]
@@ -418,7 +419,7 @@ def test_fuzz_decode_pixels(header: bytes, payload: bytes) -> None:
     only_protocol_errors(lambda: decode_pixels(payload, lead, DEV))
 
 
-@settings(max_examples=100, deadline=None)
+@fuzz_settings(100)
 @given(transfers=st.lists(st.one_of(st.binary(max_size=80), st.sampled_from([
     leader(1, MONO8, 13, 9), leader(2, MONO16, 4, 4), trailer(1, 117, 9), trailer(2, 32, 4)])), max_size=30))
 def test_fuzz_assembler(transfers: list[bytes]) -> None:
