@@ -154,7 +154,7 @@ def attach(dev: usb.core.Device, deadline: float, device: str,
         control.write_chunk = gencp.max_write_chunk(sbrm.max_command_transfer_length)
     except ValueError as exc:
         raise ProtocolError(device, f"SBRM transfer lengths: {exc}") from None
-    control.ack_buffer = sbrm.max_ack_transfer_length
+    control.ack_buffer = gencp.ack_buffer_size(sbrm.max_ack_transfer_length)  # a u32: never 4 GiB per read
     if sbrm.stream_channel_count < 1:
         raise ProtocolError(device, "SBRM reports no stream channel; expected one")
     features = _read_features(control, abrm, deadline, device)
