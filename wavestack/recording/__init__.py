@@ -15,8 +15,9 @@ package re-exports the public names, so ``from wavestack.recording import Record
 from __future__ import annotations
 
 from wavestack.recording.format import FORMAT_NAME, FORMAT_VERSION, ResultRow, RowValue
-from wavestack.recording.reader import RecordingReader
-from wavestack.recording.replay import ReplayedResult, recorded_config, replay
+from wavestack.recording.paths import check_recording_path
+from wavestack.recording.reader import Damage, RecordingDamaged, RecordingReader
+from wavestack.recording.replay import ReplayedResult, SkippedSet, recorded_config, replay
 from wavestack.recording.station_rows import (
     FRAME_METADATA,
     StationRecorder,
@@ -26,6 +27,6 @@ from wavestack.recording.station_rows import (
 )
 from wavestack.recording.writer import RecordingWriter
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FRAME_METADATA", "RecordingReader", "RecordingWriter",
-           "ReplayedResult", "ResultRow", "RowValue", "StationRecorder", "conventions", "open_recording", "recorded_config", "recording_row",
-           "replay"]
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FRAME_METADATA", "Damage", "RecordingDamaged", "RecordingReader",
+           "RecordingWriter", "ReplayedResult", "ResultRow", "RowValue", "SkippedSet", "StationRecorder",
+           "check_recording_path", "conventions", "open_recording", "recorded_config", "recording_row", "replay"]

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from wavestack.config import StationConfig, parse_station_config
-from wavestack.recording.reader import RecordingReader
+from wavestack.recording.reader import RecordingDamaged, RecordingReader
 from wavestack.station import InterferometerOutcome, SlopeOutcome, build_processor, json_ready
 
 
@@ -63,13 +63,35 @@ class ReplayedResult:
                            "residual_pv_difference": self.residual_pv_difference})
 
 
+@dataclass(frozen=True)
+class SkippedSet:
+    """A recorded set that could not be read intact, so was not replayed.
+
+    Attributes
+    ----------
+    position : int
+        Its position in the recording.
+    index : int
+        The station's set index (-1 when that too is damaged).
+    reason : str
+    """
+
+    position: int
+    index: int
+    reason: str
+
+    def to_json(self) -> dict[str, object]:
+        return {"type": "skipped", "position": self.position, "index": self.index, "reason": self.reason}
+
+
 def recorded_config(reader: RecordingReader, path: str | Path) -> StationConfig:
     """The configuration the recording was made with."""
     return parse_station_config(reader.config_toml, source=f"{path} (recorded configuration)")
 
 
-def replay(reader: RecordingReader, config: StationConfig, *, same_settings: bool) -> Iterator[ReplayedResult]:
-    """Recompute every recorded set.
+def replay(reader: RecordingReader, config: StationConfig, *,
+           same_settings: bool) -> Iterator[ReplayedResult | SkippedSet]:
+    """Recompute every intact recorded set; a damaged one is yielded as a :class:`SkippedSet`.
 
     Parameters
     ----------
@@ -81,7 +103,8 @@ def replay(reader: RecordingReader, config: StationConfig, *, same_settings: boo
 
     Yields
     ------
-    ReplayedResult
+    ReplayedResult or SkippedSet
+        In recording order; after the last, ``reader.damage`` lists every damaged part.
     """
     recorded = reader.results()
     rows = {int(i): k for k, i in enumerate(recorded.get("index", []))}
@@ -89,7 +112,11 @@ def replay(reader: RecordingReader, config: StationConfig, *, same_settings: boo
     try:
         for position in range(reader.n_sets):
             set_index = int(reader.set_indices[position])
-            frames = reader.read_set(position)
+            try:
+                frames = reader.read_set(position)
+            except RecordingDamaged as error:
+                yield SkippedSet(position, set_index, str(error))
+                continue
             row = rows.get(set_index)
             method = None
             if same_settings and row is not None and recorded["fitter"][row]:
