@@ -37,8 +37,10 @@ Three layers, because each misses something the others catch:
   computed by the writer from the values it stores and checked by the reader on the values it
   reads back: end to end, one row at a time.
 - The root attribute ``header_crc32`` covers the configuration and the conventions
-  (:func:`header_crc32`): HDF5 keeps more than 8 attributes of a group in a fractal heap whose
-  blocks carry no checksum by default.
+  (:func:`header_crc32`), and ``/integrity`` attribute ``layout_crc32`` the names, kinds and
+  shapes of the result columns and the metadata keys (:func:`layout_crc32`): HDF5 keeps more than
+  8 attributes or links of a group in a fractal heap whose blocks carry no checksum by default.
+  ``layout_crc32`` is written when SWMR starts (both are known then), or at ``close``.
 
 A version 1 recording (no checksums) still reads: HDF5's metadata checksums and the reader's
 end-of-file check on every chunk still catch truncation, but a flipped pixel byte cannot be
@@ -87,6 +89,16 @@ def header_crc32(attrs: Mapping[str, Any], conventions: Mapping[str, Any]) -> in
     keys = ("format", "format_version", "software_version", "config_toml", "created_utc")
     header = {k: _plain(attrs.get(k)) for k in keys} | {"conventions": {k: _plain(v) for k, v in conventions.items()}}
     return zlib.crc32(json.dumps(header, sort_keys=True).encode("utf-8"))
+
+
+def layout_crc32(result_columns: Sequence[_Column], metadata_keys: Sequence[str]) -> int:
+    """CRC-32 of the result columns (names, kinds, shapes) and frame-metadata keys, in order.
+
+    HDF5 keeps the links of a group with more than 8 members in a fractal heap whose blocks carry
+    no checksum by default, so a changed column name would otherwise pass unnoticed.
+    """
+    layout = {"results": [[c.key, c.kind, list(c.shape)] for c in result_columns], "metadata": list(metadata_keys)}
+    return zlib.crc32(json.dumps(layout).encode("utf-8"))
 
 
 def set_crc32(pixels: NDArray[Any], set_index: int, frame_columns: Sequence[NDArray[np.int64]],

@@ -34,6 +34,7 @@ from wavestack.recording.format import (
     _chunk_damage,
     _ResultColumns,
     header_crc32,
+    layout_crc32,
     read_rows,
     set_crc32,
 )
@@ -225,6 +226,10 @@ class RecordingReader:
         crc = self._dataset("integrity/result_crc32", "u", 1) if self.format_version >= 2 else None
         limits = [*([int(committed[2])] if committed is not None else []), *([len(crc)] if crc is not None else [])]
         table = _ResultColumns.open(group, min(limits, default=2**62))
+        stored_layout = self._file["integrity"].attrs.get("layout_crc32") if crc is not None else None
+        if stored_layout is not None and stored_layout != layout_crc32(table.columns, self.metadata_keys):
+            raise InputError(f"{self.path}: damaged wavestack recording: the result column names or metadata keys "
+                             "fail their CRC-32 (layout_crc32)")
         read = table.read(self._file_bytes)
         ok = read.ok.copy()
         self._note_rows("results", ok, read.reason)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from wavestack.config import StationConfig, parse_station_config
+from wavestack.pipeline import InputError
 from wavestack.recording.reader import RecordingDamaged, RecordingReader
 from wavestack.station import InterferometerOutcome, SlopeOutcome, build_processor, json_ready
 
@@ -107,6 +108,10 @@ def replay(reader: RecordingReader, config: StationConfig, *,
         In recording order; after the last, ``reader.damage`` lists every damaged part.
     """
     recorded = reader.results()
+    missing = [key for key in ("valid", "fitter", "coefficients") if "index" in recorded and key not in recorded]
+    if missing:
+        raise InputError(f"{reader.path}: malformed station recording: result columns {missing} missing "
+                         "(expected beside 'index')")
     rows = {int(i): k for k, i in enumerate(recorded.get("index", []))}
     processor = build_processor(config, background_builds=False)
     try:

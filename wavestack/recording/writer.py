@@ -55,6 +55,7 @@ from wavestack.recording.format import (
     _append_rows,
     _column_name_ok,
     header_crc32,
+    layout_crc32,
     set_crc32,
     _columns_of,
     _growable,
@@ -214,8 +215,13 @@ class RecordingWriter:
     def _start_swmr_when_ready(self) -> None:
         if self._file.swmr_mode or self._metadata_keys is None or self._results is None:
             return
+        self._write_layout_crc32()  # SWMR forbids new attributes: now or never
         self._file.swmr_mode = True  # flushes; from here on the file stays consistent on disk
         _log.info("recording %s: SWMR on, crash-safe from set %d", self.path, self._n_sets)
+
+    def _write_layout_crc32(self) -> None:
+        columns = () if self._results is None else self._results.columns
+        self._file["integrity"].attrs["layout_crc32"] = layout_crc32(columns, self._metadata_keys or ())
 
     # -- public verbs ---------------------------------------------------------------------------
     @property
@@ -359,6 +365,8 @@ class RecordingWriter:
         if self._closed:
             return
         try:
+            if not self._file.swmr_mode:
+                self._write_layout_crc32()
             self.flush()
         finally:
             self._closed = True
