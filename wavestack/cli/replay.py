@@ -62,14 +62,15 @@ def _line(item: ReplayedResult | SkippedSet) -> str:
     diff = "" if item.difference_rms is None else f", differs from the recording by {item.difference_rms:.2e} waves rms"
     if item.residual_pv_difference is not None:
         diff += f", residual pv {p.residual_pv:.4f} waves ({item.residual_pv_difference:+.2e})"
-    return f"result {item.index}: {state}, fitter {fitter}{diff}"
+    after = ", after a damaged set (may differ from the live run)" if item.affected_by_damage else ""
+    return f"result {item.index}: {state}, fitter {fitter}{diff}{after}"
 
 
 class _Tally:
     """Counts of a replay for its summary line."""
 
     def __init__(self) -> None:
-        self.count = self.valid = self.compared = self.compared_pv = self.skipped = 0
+        self.count = self.valid = self.compared = self.compared_pv = self.skipped = self.affected_by_damage = 0
         self.worst = self.worst_pv = 0.0
 
     def add(self, item: ReplayedResult | SkippedSet) -> None:
@@ -78,6 +79,7 @@ class _Tally:
             return
         self.count += 1
         self.valid += item.processed.valid
+        self.affected_by_damage += item.affected_by_damage
         if item.difference_rms is not None:
             self.compared += 1
             self.worst = max(self.worst, item.difference_rms)
@@ -88,12 +90,14 @@ class _Tally:
     def summary(self) -> dict[str, object]:
         return {"type": "summary", "results": self.count, "valid": self.valid, "compared": self.compared,
                 "max_difference_rms": self.worst if self.compared else None, "compared_residual_pv": self.compared_pv,
-                "max_residual_pv_difference": self.worst_pv if self.compared_pv else None, "skipped": self.skipped}
+                "max_residual_pv_difference": self.worst_pv if self.compared_pv else None, "skipped": self.skipped,
+                "affected_by_damage": self.affected_by_damage}
 
     def text(self) -> str:
         pv = (f"; residual pv compared for {self.compared_pv}, largest difference {self.worst_pv:.2e} waves"
               if self.compared_pv else "; residual pv not compared (not in this recording)" if self.compared else "")
-        skipped = f"; {self.skipped} damaged sets not replayed" if self.skipped else ""
+        skipped = (f"; {self.skipped} damaged sets not replayed, {self.affected_by_damage} results after them"
+                   if self.skipped else "")
         return (f"{self.count} results replayed ({self.valid} valid); {self.compared} compared with the recording, "
                 f"largest difference {self.worst:.2e} waves rms{pv}{skipped}")
 

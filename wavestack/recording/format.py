@@ -352,7 +352,7 @@ def read_rows(dataset: h5py.Dataset, n_rows: int, file_bytes: int) -> tuple[NDAr
         if not why:
             try:
                 values[start:stop] = dataset[start:stop]
-            except OSError as error:  # a checksum mismatch, or metadata beyond the end of the file
+            except (OSError, RuntimeError) as error:  # a checksum mismatch, or metadata beyond the end of the file
                 why = f"fails its checksum ({error})" if "filter" in str(error) else f"is unreadable ({error})"
         if why:
             ok[start:stop] = False
@@ -366,7 +366,7 @@ def _chunk_damage(dataset: h5py.Dataset, row: int, file_bytes: int) -> str:
         return ""
     try:
         info = dataset.id.get_chunk_info_by_coord((row - row % dataset.chunks[0],) + (0,) * (dataset.ndim - 1))
-    except (OSError, ValueError, KeyError) as error:
+    except (OSError, RuntimeError, ValueError, KeyError) as error:  # h5py raises RuntimeError for some
         return f"is unreadable (its chunk index: {error})"
     if info.byte_offset is not None and info.byte_offset + info.size > file_bytes:
         return f"lies beyond the end of the file ({file_bytes} bytes): truncated"

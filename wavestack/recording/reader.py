@@ -104,9 +104,10 @@ class RecordingReader:
         except InputError:
             self._file.close()
             raise
-        except (KeyError, TypeError, ValueError, OSError, IndexError, AttributeError) as error:
+        except (KeyError, TypeError, ValueError, OSError, RuntimeError, IndexError, AttributeError) as error:
             self._file.close()
-            raise InputError(f"{self.path}: damaged or malformed wavestack recording ({error})") from error
+            cut = f"file truncated ({self._damage[0].reason.split(': ', 1)[1]}), " if opened.truncated else ""
+            raise InputError(f"{self.path}: damaged or malformed wavestack recording ({cut}{error})") from error
         except BaseException:
             self._file.close()
             raise
@@ -281,7 +282,7 @@ class RecordingReader:
         if not why:
             try:
                 return np.asarray(self._pixels[i])
-            except OSError as error:
+            except (OSError, RuntimeError) as error:
                 why = f"fails its checksum ({error})" if "filter" in str(error) else f"is unreadable ({error})"
         self._set_damaged(i, f"pixel data {why}")
         raise AssertionError("unreachable")
@@ -314,7 +315,7 @@ class RecordingReader:
         if not why:
             try:
                 return np.asarray(self._masks[position], dtype=np.bool_)
-            except OSError as error:
+            except (OSError, RuntimeError) as error:
                 why = f"is unreadable ({error})"
         self._damage.append(Damage("apertures", position, position, why))
         raise RecordingDamaged(f"{self.path}: aperture {position}: {why}")

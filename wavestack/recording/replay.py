@@ -43,6 +43,12 @@ class ReplayedResult:
         results carried it).
     residual_pv_difference : float or None
         Recomputed minus recorded residual peak-to-valley, waves.
+    affected_by_damage : bool
+        This result may differ from the live one because of damage elsewhere: a set before it was
+        not replayed (the processing carries state from set to set: the temporal unwrapper's
+        reference phase, the aperture being confirmed, the carrier; ~1e-4 waves on the small
+        station), or its recorded result row is damaged, so the fitter that ran live is unknown.
+        Results not affected reproduce the live ones exactly.
     """
 
     index: int
@@ -52,6 +58,7 @@ class ReplayedResult:
     difference_rms: float | None
     recorded_residual_pv: float | None = None
     residual_pv_difference: float | None = None
+    affected_by_damage: bool = False
 
     def to_json(self) -> dict[str, object]:
         p = self.processed
@@ -61,7 +68,7 @@ class ReplayedResult:
                            "fitter": p.fitter_kind, "fitter_fallback": p.fitter_fallback,
                            "unwrap_path": p.unwrap_path, "residual_rms": p.residual_rms,
                            "residual_pv": p.residual_pv, "difference_rms": self.difference_rms,
-                           "residual_pv_difference": self.residual_pv_difference})
+                           "residual_pv_difference": self.residual_pv_difference, "affected_by_damage": self.affected_by_damage})
 
 
 @dataclass(frozen=True)
@@ -114,6 +121,8 @@ def replay(reader: RecordingReader, config: StationConfig, *,
                          "(expected beside 'index')")
     rows = {int(i): k for k, i in enumerate(recorded.get("index", []))}
     processor = build_processor(config, background_builds=False)
+    gap = False
+    rows_lost = any(d.part == "results" for d in reader.damage)
     try:
         for position in range(reader.n_sets):
             set_index = int(reader.set_indices[position])
@@ -121,6 +130,7 @@ def replay(reader: RecordingReader, config: StationConfig, *,
                 frames = reader.read_set(position)
             except RecordingDamaged as error:
                 yield SkippedSet(position, set_index, str(error))
+                gap = True
                 continue
             row = rows.get(set_index)
             method = None
@@ -139,6 +149,6 @@ def replay(reader: RecordingReader, config: StationConfig, *,
             if live_pv is not None and processed.valid:
                 pv_difference = float(processed.residual_pv - live_pv)
             yield ReplayedResult(set_index, tuple(f.frame_id for f in frames), processed, live, difference,
-                                 live_pv, pv_difference)
+                                 live_pv, pv_difference, gap or (rows_lost and row is None))
     finally:
         processor.close()
