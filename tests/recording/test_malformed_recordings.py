@@ -165,9 +165,7 @@ def test_a_flipped_byte_in_a_set_or_row_is_reported_not_replayed(tmp_path: Path)
             assert reader.read_set(i)[0].pixels[0, 0] == 100 * i
         with pytest.raises(RecordingDamaged, match="recorded set 3"):
             reader.read_set(3)
-        assert [str(d) for d in reader.damage] == [
-            "sets 3: pixel data fails its checksum (Can't synchronously read data (filter returned failure during "
-            "read))"]
+        assert [str(d) for d in reader.damage] == ["sets 3: fails its CRC-32 (changed or zeroed bytes)"]
 
 
 def test_a_version_1_recording_without_checksums_still_reads(tmp_path: Path) -> None:

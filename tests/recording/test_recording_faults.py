@@ -140,7 +140,7 @@ def test_damaged_recordings_replay_their_intact_part_or_fail_in_one_line(live: L
     _flip(flipped, offset + size // 2)
     zeroed = cases["pixel chunk zeroed"] = _copy(live.path, tmp_path / "pixel-zeroed.h5")
     offset, size = _chunk(zeroed, "sets/pixels", 3)
-    with zeroed.open("r+b") as stream:  # fletcher32 accepts an all-zero chunk: the per-set CRC-32 does not
+    with zeroed.open("r+b") as stream:  # fletcher32 would accept an all-zero chunk: the per-set CRC-32 does not
         stream.seek(offset)
         stream.write(bytes(size))
     result_flip = cases["result flip"] = _copy(live.path, tmp_path / "result-flip.h5")
@@ -162,7 +162,7 @@ def test_damaged_recordings_replay_their_intact_part_or_fail_in_one_line(live: L
         assert seen[label][2] is None, f"{label} should fail in one line: {outcomes[cases[label]]}"
     results, skipped, summary = seen["pixel flip"]
     assert [s["position"] for s in skipped] == [2] and len(results) == len(live.results) - 1
-    assert "checksum" in summary["damage"][0]
+    assert "CRC-32" in summary["damage"][0]
     results, skipped, summary = seen["pixel chunk zeroed"]
     assert [s["position"] for s in skipped] == [3] and "CRC-32" in summary["damage"][0]
     results, skipped, summary = seen["result flip"]  # one chunk holds the 6 rows: all are lost, no set

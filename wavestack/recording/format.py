@@ -28,19 +28,25 @@ Three layers, because each misses something the others catch:
 
 - HDF5 checks its own metadata (``libver="latest"``: superblock, object headers and chunk
   indexes carry lookup3 checksums), so a damaged header or index is an error, never silent.
-- Every dataset is chunked (``committed_counts`` too, for this) and carries HDF5's
-  ``fletcher32`` filter: a bit flip in any chunk fails its read. A pixel chunk is one set, so a
-  flip costs one set; the small per-row columns are chunked by ``_CHUNK_BYTES`` (64 KiB).
-- ``fletcher32`` accepts an all-zero chunk (stored and computed sums are both 0), which is what a
-  truncated file, or a zeroed disk block, reads as. So each set and each result row also carries a
-  CRC-32 (:func:`set_crc32`, :func:`result_row_crc32`; ``zlib.crc32`` of zeros is never 0),
-  computed by the writer from the values it stores and checked by the reader on the values it
-  reads back: end to end, one row at a time.
+- Pixels: a CRC-32 per set (``/integrity/set_crc32``, :func:`set_crc32`) over the set's pixels,
+  set index, frame columns and metadata row, computed by the writer from the values it stores and
+  checked by the reader on the values it reads back, one set at a time (a pixel chunk is one set).
+  Not HDF5's ``fletcher32`` filter: it accepts an all-zero chunk (stored and computed sums are both
+  0), which is what a truncated file or a zeroed disk block reads as, and it is slow: measured on a
+  5 x 1024 x 1024 uint16 set, writing took ~45 ms more per set with it, ~15 ms more with the CRC
+  (``zlib.crc32`` of zeros is never 0).
+- Every other dataset is chunked (``committed_counts`` too, for this) and carries ``fletcher32``:
+  a bit flip in a chunk fails its read. These chunks are small (``_CHUNK_BYTES``, 64 KiB), so a
+  flip costs at most one chunk of rows; result rows also carry a CRC-32 each
+  (``/integrity/result_crc32``, :func:`result_row_crc32`), which catches zeroed chunks.
 - The root attribute ``header_crc32`` covers the configuration and the conventions
   (:func:`header_crc32`), and ``/integrity`` attribute ``layout_crc32`` the names, kinds and
   shapes of the result columns and the metadata keys (:func:`layout_crc32`): HDF5 keeps more than
   8 attributes or links of a group in a fractal heap whose blocks carry no checksum by default.
   ``layout_crc32`` is written when SWMR starts (both are known then), or at ``close``.
+
+A truncated file is also caught before any checksum: the reader compares every chunk's extent
+with the file's real size (see :func:`read_rows` and :mod:`wavestack.recording.hdf5_open`).
 
 A version 1 recording (no checksums) still reads: HDF5's metadata checksums and the reader's
 end-of-file check on every chunk still catch truncation, but a flipped pixel byte cannot be

@@ -55,6 +55,8 @@ class Damage:
     reason: str
 
     def __str__(self) -> str:
+        if self.part == "file":
+            return f"file {self.reason}"
         rows = f"{self.first}" if self.first == self.last else f"{self.first}-{self.last}"
         return f"{self.part} {rows}: {self.reason}"
 
@@ -219,6 +221,16 @@ class RecordingReader:
         n = min(len(self._masks), len(from_set))
         self._aperture_from, self._aperture_ok, why = read_rows(from_set, n, self._file_bytes)
         self._note_rows("apertures", self._aperture_ok, f"from_set {why}")
+        for position in np.flatnonzero(self._aperture_ok).tolist():  # a handful of masks: check each now
+            why = _chunk_damage(self._masks, position, self._file_bytes)
+            if not why:
+                try:
+                    self._masks[position]
+                except (OSError, RuntimeError) as error:
+                    why = f"mask is unreadable ({error})"
+            if why:
+                self._aperture_ok[position] = False
+                self._damage.append(Damage("apertures", position, position, why))
 
     def _load_results(self, committed: NDArray[np.int64] | None) -> None:
         group = self._file.get("results")
@@ -248,7 +260,14 @@ class RecordingReader:
     @property
     def damage(self) -> tuple[Damage, ...]:
         """Every part found damaged so far (at opening, and by :meth:`read_set` and :meth:`aperture_for`)."""
-        return tuple(self._damage)
+        merged: list[Damage] = []
+        for d in self._damage:  # runs of rows damaged for the same reason, e.g. a truncated tail, as one
+            last = merged[-1] if merged else None
+            if last and (last.part, last.reason) == (d.part, d.reason) and last.last + 1 == d.first:
+                merged[-1] = Damage(d.part, last.first, d.last, d.reason)
+            else:
+                merged.append(d)
+        return tuple(merged)
 
     def read_set(self, i: int) -> tuple[Frame, ...]:
         """The ``i``-th recorded set (0 <= i < n_sets), metadata restored as floats (NaN omitted).
@@ -310,15 +329,12 @@ class RecordingReader:
         position = int(np.searchsorted(self._aperture_from, set_index, side="right")) - 1
         if position < 0:
             return None
-        why = "" if self._aperture_ok[position] else "its from_set is damaged"
-        why = why or _chunk_damage(self._masks, position, self._file_bytes)
-        if not why:
+        if self._aperture_ok[position]:
             try:
                 return np.asarray(self._masks[position], dtype=np.bool_)
-            except (OSError, RuntimeError) as error:
-                why = f"is unreadable ({error})"
-        self._damage.append(Damage("apertures", position, position, why))
-        raise RecordingDamaged(f"{self.path}: aperture {position}: {why}")
+            except (OSError, RuntimeError) as error:  # read intact at opening: only if the file changed since
+                raise RecordingDamaged(f"{self.path}: aperture {position} is unreadable ({error})") from error
+        raise RecordingDamaged(f"{self.path}: aperture {position} is damaged (see the damage report)")
 
     def results(self) -> dict[str, NDArray[Any]]:
         """The intact result rows in recording order: (n_results, *shape) arrays; strings as object arrays."""

@@ -195,7 +195,7 @@ class RecordingWriter:
         rows, cols = self._frame_shape
         filters: dict[str, Any] = {"compression": "gzip", "compression_opts": 1, "shuffle": True} if compress else {}
         sets.create_dataset("pixels", shape=(0, self._fps, rows, cols), maxshape=(None, self._fps, rows, cols),
-                            chunks=(1, self._fps, rows, cols), dtype=self._dtype, fletcher32=True, **filters)
+                            chunks=(1, self._fps, rows, cols), dtype=self._dtype, **filters)  # CRC-32 per set
         _growable(sets, "set_index", (), np.int64)
         for name in _FRAME_COLUMNS:
             _growable(sets, name, (self._fps,), np.int64)
