@@ -25,6 +25,7 @@ import h5py
 import numpy as np
 import pytest
 
+from wavestack.cli import main
 from wavestack.recording import RecordingReader, recorded_config, replay
 from wavestack.recording.replay import ReplayedResult
 
@@ -131,7 +132,8 @@ def _check_outcome(label: str, outcome: dict, live: Live) -> tuple[list[dict], l
 
 
 @pytest.mark.slow
-def test_damaged_recordings_replay_their_intact_part_or_fail_in_one_line(live: Live, tmp_path: Path) -> None:
+def test_damaged_recordings_replay_their_intact_part_or_fail_in_one_line(live: Live, tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture) -> None:
     cases: dict[str, Path] = {}
     for keep in (0.001, 0.01, 0.1, 0.5, 0.9, 0.99):
         cases[f"truncated {keep:.1%}"] = _copy(live.path, tmp_path / f"cut-{keep}.h5", keep)
@@ -168,6 +170,12 @@ def test_damaged_recordings_replay_their_intact_part_or_fail_in_one_line(live: L
     results, skipped, summary = seen["result flip"]  # one chunk holds the 6 rows: all are lost, no set
     assert len(results) == len(live.results) and not skipped and summary["compared"] < len(live.results)
     assert any(d.startswith("results") for d in summary["damage"])
+    assert main(["replay", str(flipped)]) == 2  # the text view says the same: set 2 skipped, one line on stderr
+    out, err = capsys.readouterr()
+    assert "(recorded set 2): not replayed, damaged" in out and "1 damaged sets not replayed" in out
+    assert [line for line in err.splitlines() if line.startswith("wavestack replay")] == [
+        f"wavestack replay: {flipped}: damaged recording, 1 sets not replayed: sets 2: fails its CRC-32 (changed or "
+        "zeroed bytes)"]
     for label in ("truncated 90.0%", "truncated 99.0%"):
         results, skipped, summary = seen[label]
         assert summary is not None and summary["damage"], label  # the cut is reported, whatever survived

@@ -5,8 +5,10 @@ reads back with :class:`RecordingReader`. Both are generic: a result row is any 
 numbers, bools, strings and numeric arrays, so they do not know the station's result type.
 
 The work is split by concept: :mod:`wavestack.recording.format` (names, HDF5 layout, the
-result table), :mod:`wavestack.recording.writer` (appending and the crash-safe commit
-protocol), :mod:`wavestack.recording.reader` (reading committed rows back),
+result table, the checksums), :mod:`wavestack.recording.writer` (appending and the crash-safe
+commit protocol), :mod:`wavestack.recording.hdf5_open` (opening without SWMR read mode, which
+hung on damaged files), :mod:`wavestack.recording.reader` (reading committed rows back, reporting
+damage), :mod:`wavestack.recording.paths` (the ``--record`` path checked before devices open),
 :mod:`wavestack.recording.station_rows` (what the station writes: one fixed-shape row per
 result) and :mod:`wavestack.recording.replay` (the pipeline run again on a recording). This
 package re-exports the public names, so ``from wavestack.recording import RecordingWriter`` works.

@@ -272,7 +272,7 @@ class RecordingWriter:
             for key, value in _numeric_metadata(frame).items():
                 if key in metadata:
                     metadata[key][j] = value
-                elif key not in self._ignored_keys:
+                elif key not in self._ignored_keys and len(self._ignored_keys) < 64:  # bounded: a log, not a store
                     self._ignored_keys.add(key)
                     _log.warning("recording %s: frame metadata %r first seen at set %d is not a column "
                                  "(declare it in metadata_keys); not stored", self.path, key, set_index)
