@@ -6,6 +6,8 @@ version 1 recordings (no checksums) still reading.
 
 from __future__ import annotations
 
+import doctest
+import importlib
 import os
 import tempfile
 import time
@@ -211,3 +213,15 @@ def test_check_recording_path(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="already exists"):
         check_recording_path(existing)
     assert check_recording_path(existing, overwrite=True) == existing
+
+
+@pytest.mark.parametrize("name", ["wavestack.recording.hdf5_open", "wavestack.recording.paths"])
+def test_examples_run_and_match(name: str) -> None:
+    module = importlib.import_module(name)
+    tests = [test for test in doctest.DocTestFinder(exclude_empty=True).find(module, name) if test.examples]
+    assert tests, f"{name} has no Examples section any more"
+    runner = doctest.DocTestRunner()
+    for test in tests:
+        runner.run(test)
+    outcome = runner.summarize(verbose=False)
+    assert outcome.failed == 0 and outcome.attempted > 0

@@ -33,9 +33,9 @@ def check_recording_path(path: str | Path, *, overwrite: bool = False) -> Path:
     Examples
     --------
     >>> import tempfile
-    >>> folder = tempfile.mkdtemp()
-    >>> check_recording_path(f"{folder}/run.h5").name
-    'run.h5'
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     print(check_recording_path(f"{folder}/run.h5").name)
+    run.h5
     """
     target = Path(path)
     expected = "expected a new file in an existing, writable folder"

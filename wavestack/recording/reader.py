@@ -289,7 +289,7 @@ class RecordingReader:
             found = set_crc32(pixels, int(self.set_indices[i]), [ids, host, device],
                               [m[i] for m in self._metadata.values()])
             if found != int(self._set_crc[i]):
-                self._set_damaged(i, "fails its CRC-32 (changed or zeroed bytes)")
+                raise self._set_damaged(i, "fails its CRC-32 (changed or zeroed bytes)")
         frames = []
         for j in range(self.frames_per_set):
             metadata = {k: float(v[i, j]) for k, v in self._metadata.items() if not math.isnan(v[i, j])}
@@ -303,13 +303,13 @@ class RecordingReader:
                 return np.asarray(self._pixels[i])
             except (OSError, RuntimeError) as error:
                 why = f"fails its checksum ({error})" if "filter" in str(error) else f"is unreadable ({error})"
-        self._set_damaged(i, f"pixel data {why}")
-        raise AssertionError("unreachable")
+        raise self._set_damaged(i, f"pixel data {why}")
 
-    def _set_damaged(self, i: int, reason: str) -> None:
+    def _set_damaged(self, i: int, reason: str) -> RecordingDamaged:
+        """Mark set ``i`` damaged; the error to raise."""
         self._set_ok[i] = False
         self._damage.append(Damage("sets", i, i, reason))
-        raise RecordingDamaged(f"{self.path}: recorded set {i} (station set {int(self.set_indices[i])}): {reason}")
+        return RecordingDamaged(f"{self.path}: recorded set {i} (station set {int(self.set_indices[i])}): {reason}")
 
     def iter_sets(self) -> Iterator[tuple[Frame, ...]]:
         """Every recorded set in order (see :meth:`read_set`; a damaged set raises)."""
