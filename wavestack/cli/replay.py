@@ -9,7 +9,7 @@ from pathlib import Path
 
 from wavestack.cli.command import Command
 from wavestack.recording import RecordingReader
-from wavestack.recording.replay import recorded_config, replay
+from wavestack.recording.replay import ReplayedResult, SkippedSet, recorded_config, replay
 from wavestack.config import load_station_config
 
 
@@ -21,49 +21,91 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="one JSON object per line, then a summary")
 
 
+#: Exit status when the recording is damaged: its intact part was replayed, the rest reported.
+EXIT_DAMAGED = 2
+
+
 def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    """Replay a recording; returns the exit status."""
+    """Replay a recording; returns the exit status (2 when it is damaged, after replaying what is intact)."""
     out = sys.stdout
-    count = valid = 0
-    worst = worst_pv = 0.0
-    compared = compared_pv = 0
+    tally = _Tally()
     with RecordingReader(args.recording) as reader:
         config = load_station_config(args.config) if args.config else recorded_config(reader, args.recording)
-        for result in replay(reader, config, same_settings=args.config is None):
-            count += 1
-            valid += result.processed.valid
-            if result.difference_rms is not None:
-                compared += 1
-                worst = max(worst, result.difference_rms)
-            if result.residual_pv_difference is not None:
-                compared_pv += 1
-                worst_pv = max(worst_pv, abs(result.residual_pv_difference))
+        for item in replay(reader, config, same_settings=args.config is None):
             if args.json:
-                out.write(json.dumps(result.to_json()) + "\n")
+                out.write(json.dumps(item.to_json()) + "\n")
             else:
-                p = result.processed
-                state = "valid" if p.valid else f"invalid ({p.reason})"
-                fitter = p.choice.kind if p.choice else (p.fitter_kind or "-")
-                diff = "" if result.difference_rms is None else f", differs from the recording by {result.difference_rms:.2e} waves rms"
-                if result.residual_pv_difference is not None:
-                    diff += f", residual pv {p.residual_pv:.4f} waves ({result.residual_pv_difference:+.2e})"
-                out.write(f"result {result.index}: {state}, fitter {fitter}{diff}\n")
-    summary = {"type": "summary", "results": count, "valid": valid, "compared": compared,
-               "max_difference_rms": worst if compared else None, "compared_residual_pv": compared_pv,
-               "max_residual_pv_difference": worst_pv if compared_pv else None}
+                out.write(_line(item) + "\n")
+            tally.add(item)
+        damage, notes = [str(d) for d in reader.damage], list(reader.notes)
+    summary = tally.summary() | {"damage": damage, "notes": notes}
     if args.json:
         out.write(json.dumps(summary) + "\n")
     else:
-        pv = (f"; residual pv compared for {compared_pv}, largest difference {worst_pv:.2e} waves" if compared_pv
-              else "; residual pv not compared (not in this recording)" if compared else "")
-        out.write(f"{count} results replayed ({valid} valid); {compared} compared with the recording, "
-                  f"largest difference {worst:.2e} waves rms{pv}\n")
+        out.write(tally.text() + "\n")
+    out.flush()
+    for note in notes:
+        print(f"wavestack replay: {args.recording}: note: {note}", file=sys.stderr)
+    if damage:
+        print(f"wavestack replay: {args.recording}: damaged recording, {tally.skipped} sets not replayed: "
+              + "; ".join(damage), file=sys.stderr)
+        return EXIT_DAMAGED
     return 0
+
+
+def _line(item: ReplayedResult | SkippedSet) -> str:
+    if isinstance(item, SkippedSet):
+        return f"set {item.index} (recorded set {item.position}): not replayed, damaged"
+    p = item.processed
+    state = "valid" if p.valid else f"invalid ({p.reason})"
+    fitter = p.choice.kind if p.choice else (p.fitter_kind or "-")
+    diff = "" if item.difference_rms is None else f", differs from the recording by {item.difference_rms:.2e} waves rms"
+    if item.residual_pv_difference is not None:
+        diff += f", residual pv {p.residual_pv:.4f} waves ({item.residual_pv_difference:+.2e})"
+    after = ", after a damaged set (may differ from the live run)" if item.affected_by_damage else ""
+    return f"result {item.index}: {state}, fitter {fitter}{diff}{after}"
+
+
+class _Tally:
+    """Counts of a replay for its summary line."""
+
+    def __init__(self) -> None:
+        self.count = self.valid = self.compared = self.compared_pv = self.skipped = self.affected_by_damage = 0
+        self.worst = self.worst_pv = 0.0
+
+    def add(self, item: ReplayedResult | SkippedSet) -> None:
+        if isinstance(item, SkippedSet):
+            self.skipped += 1
+            return
+        self.count += 1
+        self.valid += item.processed.valid
+        self.affected_by_damage += item.affected_by_damage
+        if item.difference_rms is not None:
+            self.compared += 1
+            self.worst = max(self.worst, item.difference_rms)
+        if item.residual_pv_difference is not None:
+            self.compared_pv += 1
+            self.worst_pv = max(self.worst_pv, abs(item.residual_pv_difference))
+
+    def summary(self) -> dict[str, object]:
+        return {"type": "summary", "results": self.count, "valid": self.valid, "compared": self.compared,
+                "max_difference_rms": self.worst if self.compared else None, "compared_residual_pv": self.compared_pv,
+                "max_residual_pv_difference": self.worst_pv if self.compared_pv else None, "skipped": self.skipped,
+                "affected_by_damage": self.affected_by_damage}
+
+    def text(self) -> str:
+        pv = (f"; residual pv compared for {self.compared_pv}, largest difference {self.worst_pv:.2e} waves"
+              if self.compared_pv else "; residual pv not compared (not in this recording)" if self.compared else "")
+        skipped = (f"; {self.skipped} damaged sets not replayed, {self.affected_by_damage} results after them"
+                   if self.skipped else "")
+        return (f"{self.count} results replayed ({self.valid} valid); {self.compared} compared with the recording, "
+                f"largest difference {self.worst:.2e} waves rms{pv}{skipped}")
 
 
 COMMAND = Command(
     "replay",
     help="run the pipeline again on a recording (same or other fit settings)",
-    description="Recompute every result of a recording made with wavestack run --record.",
+    description="Recompute every result of a recording made with wavestack run --record. A damaged recording "
+                "(truncated, or failing its checksums) replays what is intact, lists the rest, and exits with 2.",
     add_arguments=add_replay_arguments, handler=run_replay,
 )

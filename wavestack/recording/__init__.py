@@ -5,8 +5,10 @@ reads back with :class:`RecordingReader`. Both are generic: a result row is any 
 numbers, bools, strings and numeric arrays, so they do not know the station's result type.
 
 The work is split by concept: :mod:`wavestack.recording.format` (names, HDF5 layout, the
-result table), :mod:`wavestack.recording.writer` (appending and the crash-safe commit
-protocol), :mod:`wavestack.recording.reader` (reading committed rows back),
+result table, the checksums), :mod:`wavestack.recording.writer` (appending and the crash-safe
+commit protocol), :mod:`wavestack.recording.hdf5_open` (opening without SWMR read mode, which
+hung on damaged files), :mod:`wavestack.recording.reader` (reading committed rows back, reporting
+damage), :mod:`wavestack.recording.paths` (the ``--record`` path checked before devices open),
 :mod:`wavestack.recording.station_rows` (what the station writes: one fixed-shape row per
 result) and :mod:`wavestack.recording.replay` (the pipeline run again on a recording). This
 package re-exports the public names, so ``from wavestack.recording import RecordingWriter`` works.
@@ -15,8 +17,9 @@ package re-exports the public names, so ``from wavestack.recording import Record
 from __future__ import annotations
 
 from wavestack.recording.format import FORMAT_NAME, FORMAT_VERSION, ResultRow, RowValue
-from wavestack.recording.reader import RecordingReader
-from wavestack.recording.replay import ReplayedResult, recorded_config, replay
+from wavestack.recording.paths import check_recording_path
+from wavestack.recording.reader import Damage, RecordingDamaged, RecordingReader
+from wavestack.recording.replay import ReplayedResult, SkippedSet, recorded_config, replay
 from wavestack.recording.station_rows import (
     FRAME_METADATA,
     StationRecorder,
@@ -26,6 +29,6 @@ from wavestack.recording.station_rows import (
 )
 from wavestack.recording.writer import RecordingWriter
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FRAME_METADATA", "RecordingReader", "RecordingWriter",
-           "ReplayedResult", "ResultRow", "RowValue", "StationRecorder", "conventions", "open_recording", "recorded_config", "recording_row",
-           "replay"]
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "FRAME_METADATA", "Damage", "RecordingDamaged", "RecordingReader",
+           "RecordingWriter", "ReplayedResult", "ResultRow", "RowValue", "SkippedSet", "StationRecorder",
+           "check_recording_path", "conventions", "open_recording", "recorded_config", "recording_row", "replay"]

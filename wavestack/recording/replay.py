@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from wavestack.config import StationConfig, parse_station_config
-from wavestack.recording.reader import RecordingReader
+from wavestack.pipeline import InputError
+from wavestack.recording.reader import RecordingDamaged, RecordingReader
 from wavestack.station import InterferometerOutcome, SlopeOutcome, build_processor, json_ready
 
 
@@ -42,6 +43,12 @@ class ReplayedResult:
         results carried it).
     residual_pv_difference : float or None
         Recomputed minus recorded residual peak-to-valley, waves.
+    affected_by_damage : bool
+        This result may differ from the live one because of damage elsewhere: a set before it was
+        not replayed (the processing carries state from set to set: the temporal unwrapper's
+        reference phase, the aperture being confirmed, the carrier; ~1e-4 waves on the small
+        station), or its recorded result row is damaged, so the fitter that ran live is unknown.
+        Results not affected reproduce the live ones exactly.
     """
 
     index: int
@@ -51,6 +58,7 @@ class ReplayedResult:
     difference_rms: float | None
     recorded_residual_pv: float | None = None
     residual_pv_difference: float | None = None
+    affected_by_damage: bool = False
 
     def to_json(self) -> dict[str, object]:
         p = self.processed
@@ -60,7 +68,28 @@ class ReplayedResult:
                            "fitter": p.fitter_kind, "fitter_fallback": p.fitter_fallback,
                            "unwrap_path": p.unwrap_path, "residual_rms": p.residual_rms,
                            "residual_pv": p.residual_pv, "difference_rms": self.difference_rms,
-                           "residual_pv_difference": self.residual_pv_difference})
+                           "residual_pv_difference": self.residual_pv_difference, "affected_by_damage": self.affected_by_damage})
+
+
+@dataclass(frozen=True)
+class SkippedSet:
+    """A recorded set that could not be read intact, so was not replayed.
+
+    Attributes
+    ----------
+    position : int
+        Its position in the recording.
+    index : int
+        The station's set index (-1 when that too is damaged).
+    reason : str
+    """
+
+    position: int
+    index: int
+    reason: str
+
+    def to_json(self) -> dict[str, object]:
+        return {"type": "skipped", "position": self.position, "index": self.index, "reason": self.reason}
 
 
 def recorded_config(reader: RecordingReader, path: str | Path) -> StationConfig:
@@ -68,8 +97,9 @@ def recorded_config(reader: RecordingReader, path: str | Path) -> StationConfig:
     return parse_station_config(reader.config_toml, source=f"{path} (recorded configuration)")
 
 
-def replay(reader: RecordingReader, config: StationConfig, *, same_settings: bool) -> Iterator[ReplayedResult]:
-    """Recompute every recorded set.
+def replay(reader: RecordingReader, config: StationConfig, *,
+           same_settings: bool) -> Iterator[ReplayedResult | SkippedSet]:
+    """Recompute every intact recorded set; a damaged one is yielded as a :class:`SkippedSet`.
 
     Parameters
     ----------
@@ -81,15 +111,27 @@ def replay(reader: RecordingReader, config: StationConfig, *, same_settings: boo
 
     Yields
     ------
-    ReplayedResult
+    ReplayedResult or SkippedSet
+        In recording order; after the last, ``reader.damage`` lists every damaged part.
     """
     recorded = reader.results()
+    missing = [key for key in ("valid", "fitter", "coefficients") if "index" in recorded and key not in recorded]
+    if missing:
+        raise InputError(f"{reader.path}: malformed station recording: result columns {missing} missing "
+                         "(expected beside 'index')")
     rows = {int(i): k for k, i in enumerate(recorded.get("index", []))}
     processor = build_processor(config, background_builds=False)
+    gap = False
+    rows_lost = any(d.part == "results" for d in reader.damage)
     try:
         for position in range(reader.n_sets):
             set_index = int(reader.set_indices[position])
-            frames = reader.read_set(position)
+            try:
+                frames = reader.read_set(position)
+            except RecordingDamaged as error:
+                yield SkippedSet(position, set_index, str(error))
+                gap = True
+                continue
             row = rows.get(set_index)
             method = None
             if same_settings and row is not None and recorded["fitter"][row]:
@@ -107,6 +149,6 @@ def replay(reader: RecordingReader, config: StationConfig, *, same_settings: boo
             if live_pv is not None and processed.valid:
                 pv_difference = float(processed.residual_pv - live_pv)
             yield ReplayedResult(set_index, tuple(f.frame_id for f in frames), processed, live, difference,
-                                 live_pv, pv_difference)
+                                 live_pv, pv_difference, gap or (rows_lost and row is None))
     finally:
         processor.close()

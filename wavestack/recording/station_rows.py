@@ -18,6 +18,7 @@ import numpy as np
 from wavestack import __version__
 from wavestack.config import StationConfig
 from wavestack.recording.format import RowValue
+from wavestack.recording.paths import check_recording_path
 from wavestack.recording.writer import RecordingWriter
 from wavestack.station import Counters, CycleRecord, StationResult
 
@@ -65,7 +66,14 @@ def conventions(config: StationConfig) -> dict[str, str | float | int]:
 
 def open_recording(path: str, config: StationConfig, frame_shape: tuple[int, int], frame_dtype: Any,
                    *, overwrite: bool = False) -> RecordingWriter:
-    """A recording for this station, its columns declared up front."""
+    """A recording for this station, its columns declared up front.
+
+    Raises
+    ------
+    InputError
+        ``path`` cannot take a new recording (see :func:`check_recording_path`).
+    """
+    check_recording_path(path, overwrite=overwrite)
     fps = config.processing.frames_per_set
     # the columns' types and shapes, from an empty row (every row has the same ones)
     template = recording_row(StationResult.invalid(0, "", Counters.zero(fps), ordering=config.processing.ordering),

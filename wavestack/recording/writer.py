@@ -17,17 +17,26 @@ a flush but before SWMR left such a file; 20 writers killed at random times unde
 uint16, 4 frames a set, ~100 sets) all left files that opened and held every committed set,
 aperture and result bit-exact.
 
-When a set arrives after ``chunk_sets`` uncommitted ones (and on :meth:`RecordingWriter.flush` and
-``close``) the writer commits: it flushes all data, then writes ``committed_counts`` and flushes
-again. Committing before the next set, not after the last one, keeps each set's result (appended
-after the set) in the same commit. The reader trusts only committed rows,
-so a killed writer loses at most the sets, apertures and results since the last commit, and a
-row whose extent reached the disk before its data can never be read back as zeros.
+The writer commits -- flushes all data, then writes ``committed_counts`` and flushes again --
+when a set arrives after ``chunk_sets`` uncommitted ones, after a result once ``commit_interval_s``
+has passed since the last commit, and on :meth:`RecordingWriter.flush` and ``close``. Committing
+before the next set, or after a result, keeps each set's result (appended after the set) in the
+same commit. The reader trusts only committed rows, so a row whose extent reached the disk before
+its data can never be read back as zeros.
+
+Loss window: a killed writer loses only what was appended since the last commit, which is never
+more than ``chunk_sets`` sets (8 by default) with their results, and while results keep arriving
+no more than ``commit_interval_s`` (1 s by default) of them, plus the set being appended.
+
+Memory: the writer keeps no rows in Python; each row goes to HDF5 as it is appended. HDF5 holds
+at most one chunk cache per open dataset (1 MiB each, about 30 datasets) and its metadata cache
+(bounded by HDF5, a few MiB); a set larger than the chunk cache is written straight through.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Mapping, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
@@ -45,6 +54,9 @@ from wavestack.recording.format import (
     FORMAT_VERSION,
     _append_rows,
     _column_name_ok,
+    header_crc32,
+    layout_crc32,
+    set_crc32,
     _columns_of,
     _growable,
     ResultRow,
@@ -76,6 +88,8 @@ class RecordingWriter:
     chunk_sets
         Sets per commit: a crash loses at most this many sets (plus the one being appended) and
         their results. Call :meth:`flush` when the station idles to commit a partial chunk.
+    commit_interval_s
+        Commit after a result once this long has passed since the last commit, seconds.
     compress
         gzip level 1 with byte shuffle on pixels (off by default: 20 sets/s of 1024x1024 uint16
         is the target rate).
@@ -103,6 +117,7 @@ class RecordingWriter:
     def __init__(self, path: str | Path, *, config_toml: str, conventions: Mapping[str, str | float | int],
                  software_version: str, frame_shape: tuple[int, int], frame_dtype: DTypeLike,
                  frames_per_set: int, chunk_sets: int = 8, compress: bool = False, overwrite: bool = False,
+                 commit_interval_s: float = 1.0,
                  metadata_keys: Sequence[str] | None = None,
                  result_template: ResultRow | None = None) -> None:
         self.path = Path(path)
@@ -112,6 +127,8 @@ class RecordingWriter:
         dtype = np.dtype(frame_dtype)
         if dtype.kind not in "uif":
             raise ValueError(f"recording {self.path}: frame_dtype must be an integer or float dtype, got {dtype}")
+        if not commit_interval_s > 0:
+            raise ValueError(f"recording {self.path}: commit_interval_s must be > 0 s, got {commit_interval_s}")
         if frames_per_set < 1 or chunk_sets < 1:
             raise ValueError(f"recording {self.path}: frames_per_set and chunk_sets must be >= 1, "
                              f"got {frames_per_set} and {chunk_sets}")
@@ -133,6 +150,8 @@ class RecordingWriter:
         self._chunk_sets = int(chunk_sets)
         self._n_sets = self._n_apertures = self._n_results = 0
         self._since_commit = 0
+        self._commit_interval_s = float(commit_interval_s)
+        self._last_commit = time.monotonic()
         self._last_set_index: int | None = None
         self._last_aperture_from: int | None = None
         self._committed = (0, 0, 0)
@@ -167,18 +186,23 @@ class RecordingWriter:
         group = root.create_group("conventions", track_order=True)
         for key, value in conventions.items():
             group.attrs[key] = value
-        root.create_dataset("committed_counts", data=np.zeros(3, np.int64))
+        root.attrs["header_crc32"] = header_crc32(root.attrs, group.attrs)
+        root.create_dataset("committed_counts", data=np.zeros(3, np.int64), chunks=(3,), fletcher32=True)
+        integrity = root.create_group("integrity")
+        _growable(integrity, "set_crc32", (), np.uint32)
+        _growable(integrity, "result_crc32", (), np.uint32)
         sets = root.create_group("sets")
         rows, cols = self._frame_shape
         filters: dict[str, Any] = {"compression": "gzip", "compression_opts": 1, "shuffle": True} if compress else {}
         sets.create_dataset("pixels", shape=(0, self._fps, rows, cols), maxshape=(None, self._fps, rows, cols),
-                            chunks=(1, self._fps, rows, cols), dtype=self._dtype, **filters)
+                            chunks=(1, self._fps, rows, cols), dtype=self._dtype, **filters)  # CRC-32 per set
         _growable(sets, "set_index", (), np.int64)
         for name in _FRAME_COLUMNS:
             _growable(sets, name, (self._fps,), np.int64)
         apertures = root.create_group("apertures")
         apertures.create_dataset("mask", shape=(0, rows, cols), maxshape=(None, rows, cols),
-                                 chunks=(1, rows, cols), dtype=np.bool_, compression="gzip", compression_opts=1)
+                                 chunks=(1, rows, cols), dtype=np.bool_, compression="gzip", compression_opts=1,
+                                 fletcher32=True)
         _growable(apertures, "from_set", (), np.int64)
         root.create_group("results", track_order=True)
 
@@ -191,8 +215,13 @@ class RecordingWriter:
     def _start_swmr_when_ready(self) -> None:
         if self._file.swmr_mode or self._metadata_keys is None or self._results is None:
             return
+        self._write_layout_crc32()  # SWMR forbids new attributes: now or never
         self._file.swmr_mode = True  # flushes; from here on the file stays consistent on disk
         _log.info("recording %s: SWMR on, crash-safe from set %d", self.path, self._n_sets)
+
+    def _write_layout_crc32(self) -> None:
+        columns = () if self._results is None else self._results.columns
+        self._file["integrity"].attrs["layout_crc32"] = layout_crc32(columns, self._metadata_keys or ())
 
     # -- public verbs ---------------------------------------------------------------------------
     @property
@@ -243,16 +272,19 @@ class RecordingWriter:
             for key, value in _numeric_metadata(frame).items():
                 if key in metadata:
                     metadata[key][j] = value
-                elif key not in self._ignored_keys:
+                elif key not in self._ignored_keys and len(self._ignored_keys) < 64:  # bounded: a log, not a store
                     self._ignored_keys.add(key)
                     _log.warning("recording %s: frame metadata %r first seen at set %d is not a column "
                                  "(declare it in metadata_keys); not stored", self.path, key, set_index)
         if self._since_commit >= self._chunk_sets:
             self.flush()  # commit the previous chunk together with its results and apertures
         sets = self._file["sets"]
+        frame_columns = [np.array([int(getattr(f, name)) for f in frames], np.int64) for name in _FRAME_COLUMNS]
+        crc = set_crc32(pixels, set_index, frame_columns, list(metadata.values()))
         columns: list[tuple[h5py.Dataset, Any]] = [(sets["pixels"], pixels), (sets["set_index"], set_index)]
-        columns += [(sets[name], [int(getattr(f, name)) for f in frames]) for name in _FRAME_COLUMNS]
+        columns += list(zip((sets[name] for name in _FRAME_COLUMNS), frame_columns))
         columns += [(sets["metadata"][key], values) for key, values in metadata.items()]
+        columns += [(self._file["integrity/set_crc32"], crc)]
         _append_rows(columns, self._n_sets)
         self._n_sets += 1
         self._last_set_index = int(set_index)
@@ -307,8 +339,11 @@ class RecordingWriter:
         if self._results is None:
             self._results = _ResultColumns.create(self._file["results"], _columns_of(record))
             self._start_swmr_when_ready()
-        self._results.append(record, self._n_results)
+        crc = self._results.append(record, self._n_results)
+        _append_rows([(self._file["integrity/result_crc32"], crc)], self._n_results)
         self._n_results += 1
+        if time.monotonic() - self._last_commit >= self._commit_interval_s or self._since_commit >= self._chunk_sets:
+            self.flush()
 
     def flush(self) -> None:
         """Make everything appended so far durable: flush data, then commit the row counts."""
@@ -323,12 +358,15 @@ class RecordingWriter:
         self._file.flush()
         self._committed = counts
         self._since_commit = 0
+        self._last_commit = time.monotonic()
 
     def close(self) -> None:
         """Flush and close; idempotent."""
         if self._closed:
             return
         try:
+            if not self._file.swmr_mode:
+                self._write_layout_crc32()
             self.flush()
         finally:
             self._closed = True
