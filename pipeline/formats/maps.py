@@ -8,12 +8,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
-from .measured import MEASURED_MAP_SUFFIXES, read_measured_map, unsupported_reason
+from .images import decode_image
+from .limits import check_allocation
+from .measured import MEASURED_MAP_SUFFIXES, check_magnitude, read_measured_map, unsupported_reason
 
 __all__ = ["InputError", "load_map", "load_mask"]
 
@@ -28,9 +29,26 @@ def _existing(path: str | Path) -> Path:
 
 
 def _load_npy(path: Path) -> NDArray:
+    """The array, once its header's shape is within the memory budget and the file holds its bytes."""
     try:
+        with open(path, "rb") as stream:
+            version = np.lib.format.read_magic(stream)
+            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                           else np.lib.format.read_array_header_2_0)
+            shape, _, dtype = read_header(stream)
+            data_offset = stream.tell()
+        if dtype.hasobject:
+            raise ValueError(f"dtype {dtype} holds Python objects")
+        check_allocation(path, ".npy array", shape, dtype.itemsize + 8)
+        stored = path.stat().st_size - data_offset
+        needed = int(np.prod(shape)) * dtype.itemsize
+        if stored < needed:
+            raise InputError(f"{path}: truncated .npy file: its header declares {shape} {dtype} ({needed} bytes), "
+                             f"the file holds {stored}")
         return np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as error:
+    except InputError:
+        raise
+    except (ValueError, OSError, EOFError, TypeError, SyntaxError) as error:
         raise InputError(f"{path}: not a readable .npy array ({error})") from None
 
 
@@ -54,7 +72,8 @@ def load_map(path: str | Path) -> NDArray[np.float64]:
     ------
     InputError
         If the file is missing or unreadable, of an unsupported kind (said first), not 2-D,
-        not real-valued, or has no finite value.
+        not real-valued, has no finite value or a value beyond ``MAX_MAP_MAGNITUDE``, or
+        declares an array larger than the memory budget or than the file holds.
     """
     path = _existing(path)
     suffix = path.suffix.lower()
@@ -69,8 +88,10 @@ def load_map(path: str | Path) -> NDArray[np.float64]:
     if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
         raise InputError(f"{path}: expected real numbers, got dtype {array.dtype}")
     array = array.astype(np.float64)
-    if not np.isfinite(array).any():
+    finite = np.isfinite(array)
+    if not finite.any():
         raise InputError(f"{path}: every value is NaN or infinite; expected a map with valid pixels")
+    check_magnitude(path, array[finite])
     return array
 
 
@@ -101,9 +122,7 @@ def load_mask(path: str | Path, shape: tuple[int, int] | None = None) -> NDArray
         if array.dtype == object or np.iscomplexobj(array):
             raise InputError(f"{path}: expected a real or boolean mask, got dtype {array.dtype}")
     elif suffix in _IMAGE_SUFFIXES:
-        array = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if array is None:
-            raise InputError(f"{path}: not a readable image")
+        array = decode_image(path)
         if array.ndim == 3:
             array = array.any(axis=2)
     else:

@@ -81,4 +81,5 @@ COMMAND = Command(
     description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables, 'station' "
                 "measures the simulated station (results per second, latency, stages, aperture change).",
     add_arguments=add_bench_arguments, handler=run_bench,
+    subject=lambda args: str(args.config) if args.config else f"bench {args.target}",
 )

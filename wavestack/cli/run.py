@@ -20,6 +20,7 @@ import numpy as np
 
 from wavestack.cli.arguments import positive_float, positive_int
 from wavestack.cli.command import Command
+from wavestack.cli.outputs import check_output_file
 from wavestack.cli.signals import stop_on_signals
 from wavestack.config import load_station_config
 from wavestack.recording import StationRecorder, open_recording
@@ -96,6 +97,8 @@ def _summary_lines(summary: StationSummary) -> list[str]:
 
 def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Run the station until the limit, Ctrl-C or SIGTERM; returns the exit status."""
+    # every path first: a typo in --record must not cost opening (and homing) every device
+    record_to = check_output_file(args.record, "--record") if args.record else None
     config = load_station_config(args.config)
     stop = threading.Event()
     out = sys.stdout
@@ -104,10 +107,10 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         station = Station(config, devices)
         stack.callback(station.close)
         sinks: list[ResultSink] = []
-        if args.record:
+        if record_to is not None:
             camera = devices.camera
             dtype = np.uint8 if camera.pixel_format == "Mono8" else np.uint16
-            recorder = StationRecorder(open_recording(args.record, config, (camera.height, camera.width), dtype),
+            recorder = StationRecorder(open_recording(str(record_to), config, (camera.height, camera.width), dtype),
                                        config)
             stack.callback(recorder.close)
             sinks.append(recorder)
@@ -135,4 +138,5 @@ COMMAND = Command(
     description="Run a metrology station: frames -> aperture -> unwrap -> Zernike fit -> results, "
                 "live view or JSON lines, optional recording, removal commands to the polishing PLC.",
     add_arguments=add_run_arguments, handler=run_station,
+    subject=lambda args: str(args.config) if args.config else "the simulated station (default configuration)",
 )
