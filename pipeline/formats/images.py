@@ -44,7 +44,7 @@ logger = logging.getLogger(__name__)
 FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 BT601_WEIGHTS_BGR = (0.114, 0.587, 0.299)  # luma weights in OpenCV's channel order B, G, R
 _COLOUR_WARNING_FRACTION = 0.02  # channel difference (fraction of full scale) that is logged
-_LUMA_BLOCK_PIXELS = 1 << 20  # colour is converted in row blocks of about this many pixels (8 MiB float64)
+_LUMA_BLOCK_PIXELS = 1 << 18  # colour is converted in row blocks of about this many pixels (6 MiB float64)
 
 
 def _full_scale(image: NDArray) -> float:
