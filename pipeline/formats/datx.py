@@ -12,6 +12,7 @@ References
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -23,6 +24,7 @@ from numpy.typing import NDArray
 
 from .errors import InputError
 from .hdf5_checks import check_dataset_size
+from .hdf5_guard import DEFAULT_TIMEOUT_S, read_guarded
 
 __all__ = ["DatxMap", "read_datx"]
 
@@ -206,7 +208,7 @@ def _wavelength_nm(path: Path, node: h5py.Dataset, z_parameters: tuple[float, ..
     return None
 
 
-def read_datx(path: str | Path, *, max_bytes: int | None = None) -> DatxMap:
+def read_datx(path: str | Path, *, max_bytes: int | None = None, timeout_s: float = DEFAULT_TIMEOUT_S) -> DatxMap:
     """Read the surface (and intensity) of a Zygo Mx ``.datx`` (HDF5) file.
 
     The layout read, checked only against synthetic files written by our tests (no file from
@@ -242,6 +244,9 @@ def read_datx(path: str | Path, *, max_bytes: int | None = None) -> DatxMap:
         The most a dataset may make this reader allocate (default: the memory budget of
         :mod:`wavestack.pipeline.formats.limits`); a dataset must also be stored in full in the
         file (compressed by at most ``MAX_COMPRESSION_RATIO``).
+    timeout_s : float
+        The file is read in a child process that must finish within this time
+        (:mod:`wavestack.pipeline.formats.hdf5_guard`): a damaged file can hang the HDF5 library.
 
     Returns
     -------
@@ -255,7 +260,7 @@ def read_datx(path: str | Path, *, max_bytes: int | None = None) -> DatxMap:
         paths tried), the surface is not a 2-D real array, its unit is missing or unknown,
         or an attribute read above is malformed, a dataset is larger than the memory budget or
         than the file's stored bytes justify, or the HDF5 structure is damaged (link loops,
-        dangling links, unreadable chunks).
+        dangling links, unreadable chunks, a read that hangs or crashes the HDF5 library).
 
     References
     ----------
@@ -265,6 +270,15 @@ def read_datx(path: str | Path, *, max_bytes: int | None = None) -> DatxMap:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
+    datx = read_guarded(functools.partial(_read_file, max_bytes=max_bytes), path, timeout_s)
+    for array in (datx.surface_nm, datx.intensity):  # read-only again after the pipe
+        if array is not None:
+            array.flags.writeable = False
+    return datx
+
+
+def _read_file(path: Path, max_bytes: int | None) -> DatxMap:
+    """:func:`read_datx` in the calling process."""
     try:
         h5 = h5py.File(path, "r")
     except OSError as error:

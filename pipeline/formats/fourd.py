@@ -26,6 +26,7 @@ the optical path difference the file holds, for SurfaceInWaves the surface.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,7 @@ from numpy.typing import NDArray
 
 from .errors import InputError
 from .hdf5_checks import check_dataset_size
+from .hdf5_guard import DEFAULT_TIMEOUT_S, read_guarded
 
 __all__ = ["FourDMap", "is_4d_file", "read_4d"]
 
@@ -115,7 +117,7 @@ def _layout_error(path: Path, h5: h5py.File) -> InputError:
     )
 
 
-def read_4d(path: str | Path, *, max_bytes: int | None = None) -> FourDMap:
+def read_4d(path: str | Path, *, max_bytes: int | None = None, timeout_s: float = DEFAULT_TIMEOUT_S) -> FourDMap:
     """Read the map, wavelength and pixel size of a 4D Technology 4Sight ``.h5`` file.
 
     The layouts read are described in the module docstring (:mod:`wavestack.pipeline.formats.fourd`).
@@ -127,6 +129,9 @@ def read_4d(path: str | Path, *, max_bytes: int | None = None) -> FourDMap:
     max_bytes : int, optional
         The most the map may make this reader allocate (default: the memory budget of
         :mod:`wavestack.pipeline.formats.limits`); it must also be stored in full in the file.
+    timeout_s : float
+        The file is read in a child process that must finish within this time
+        (:mod:`wavestack.pipeline.formats.hdf5_guard`): a damaged file can hang the HDF5 library.
 
     Returns
     -------
@@ -139,7 +144,8 @@ def read_4d(path: str | Path, *, max_bytes: int | None = None) -> FourDMap:
         If the file is missing, not HDF5, of another HDF5 layout (the message lists what it
         holds and what was expected), its map or attributes are malformed, its map is larger
         than the memory budget or than the file's stored bytes justify, or the HDF5 structure
-        is damaged (link loops, dangling links, unreadable chunks).
+        is damaged (link loops, dangling links, unreadable chunks, a read that hangs or crashes
+        the HDF5 library).
 
     Examples
     --------
@@ -161,6 +167,13 @@ def read_4d(path: str | Path, *, max_bytes: int | None = None) -> FourDMap:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
+    fourd = read_guarded(functools.partial(_read_file, max_bytes=max_bytes), path, timeout_s)
+    fourd.map_nm.flags.writeable = False  # read-only again after the pipe
+    return fourd
+
+
+def _read_file(path: Path, max_bytes: int | None) -> FourDMap:
+    """:func:`read_4d` in the calling process."""
     try:
         h5 = h5py.File(path, "r")
     except OSError:

@@ -26,6 +26,10 @@ References
 from __future__ import annotations
 
 import logging
+import os
+import re
+import sys
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -44,6 +48,10 @@ logger = logging.getLogger(__name__)
 FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 BT601_WEIGHTS_BGR = (0.114, 0.587, 0.299)  # luma weights in OpenCV's channel order B, G, R
 _COLOUR_WARNING_FRACTION = 0.02  # channel difference (fraction of full scale) that is logged
+# What the decoders say about a file they decoded only in part (libjpeg: "Premature end of JPEG
+# file", "Corrupt JPEG data"; libpng: "... error"; OpenCV: "buffer is incomplete"); warnings such
+# as libpng's "iCCP: known incorrect sRGB profile" are not damage.
+_DAMAGE = re.compile(r"premature|corrupt|incomplete|truncat|error", re.IGNORECASE)
 _LUMA_BLOCK_PIXELS = 1 << 18  # colour is converted in row blocks of about this many pixels (6 MiB float64)
 
 
@@ -153,13 +161,41 @@ def decode_image(path: Path, max_bytes: int | None = None) -> NDArray:
         raise InputError(f"{path}: cannot read the file ({error.strerror})") from None
     size = declared_size(data)
     if size is None:
-        raise InputError(f"{path}: not a readable image (no PNG, JPEG, TIFF or BMP header giving its size)")
+        raise InputError(f"{path}: not a readable image (no PNG, JPEG, TIFF or BMP header that gives its size: "
+                         "another kind of file, or damaged or truncated)")
     check_allocation(path, "image", (size.height, size.width),
                      size.channels * size.bytes_per_sample + 8, budget - len(data))
-    image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    image, complaints = _decode_quietly(data)
     if image is None or image.size == 0:
-        raise InputError(f"{path}: not a readable image")
+        raise InputError(f"{path}: not a readable image" + (f" ({complaints})" if complaints else ""))
+    if _DAMAGE.search(complaints):  # decoded in part: the rest would be filled in, not measured
+        raise InputError(f"{path}: damaged image, decoded only in part ({complaints})")
+    if complaints:
+        logger.warning("%s: %s", path, complaints)
     return image
+
+
+def _decode_quietly(data: bytes) -> tuple[NDArray | None, str]:
+    """``cv2.imdecode`` with what the decoders print on file descriptor 2 taken into the result.
+
+    libpng and OpenCV write their complaints about a damaged file ("libpng error: IDAT:
+    incorrect data check") to the process's standard error, beside the command's one line; they
+    are captured here and returned as one line for the caller's message. The descriptor is
+    redirected for the duration of the decode only, so another thread's writes to standard error
+    during it would land in the message too (the command line decodes files in one thread).
+    """
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        sink.seek(0)
+        text = sink.read(4096).decode("utf-8", errors="replace")
+    return image, "; ".join(line.strip() for line in text.splitlines() if line.strip())
 
 
 def read_frame_set(paths: Sequence[str | Path], *, max_bytes: int | None = None) -> NDArray:

@@ -6,6 +6,8 @@ so that a command line can print it as one line.
 
 from __future__ import annotations
 
+import io
+import tokenize
 from pathlib import Path
 
 import numpy as np
@@ -28,19 +30,28 @@ def _existing(path: str | Path) -> Path:
     return path
 
 
+_NPY_HEADER_BYTES = 65536  # numpy writes headers of at most a few hundred bytes; its reader refuses > 10000
+
+
 def _load_npy(path: Path) -> NDArray:
-    """The array, once its header's shape is within the memory budget and the file holds its bytes."""
+    """The array, once its header's shape is within the memory budget and the file holds its bytes.
+
+    The header is parsed from at most the file's first 64 KiB held in memory, so a header that
+    declares a huge length of itself cannot make the reader ask for that many bytes.
+    """
     try:
         with open(path, "rb") as stream:
-            version = np.lib.format.read_magic(stream)
-            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                           else np.lib.format.read_array_header_2_0)
-            shape, _, dtype = read_header(stream)
-            data_offset = stream.tell()
+            head = io.BytesIO(stream.read(_NPY_HEADER_BYTES))
+        version = np.lib.format.read_magic(head)
+        if version not in ((1, 0), (2, 0), (3, 0)):
+            raise ValueError(f"format version {version[0]}.{version[1]} is none of 1.0, 2.0, 3.0")
+        read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                       else np.lib.format.read_array_header_2_0)
+        shape, _, dtype = read_header(head)
         if dtype.hasobject:
             raise ValueError(f"dtype {dtype} holds Python objects")
         check_allocation(path, ".npy array", shape, dtype.itemsize + 8)
-        stored = path.stat().st_size - data_offset
+        stored = path.stat().st_size - head.tell()
         needed = int(np.prod(shape)) * dtype.itemsize
         if stored < needed:
             raise InputError(f"{path}: truncated .npy file: its header declares {shape} {dtype} ({needed} bytes), "
@@ -48,8 +59,13 @@ def _load_npy(path: Path) -> NDArray:
         return np.load(path, allow_pickle=False)
     except InputError:
         raise
-    except (ValueError, OSError, EOFError, TypeError, SyntaxError) as error:
-        raise InputError(f"{path}: not a readable .npy array ({error})") from None
+    except (ValueError, OSError, EOFError, TypeError, SyntaxError, tokenize.TokenError) as error:
+        raise InputError(f"{path}: not a readable .npy array ({_one_line(error)})") from None
+
+
+def _one_line(error: BaseException) -> str:
+    """An exception's message on one line."""
+    return " ".join(str(error).split()) or type(error).__name__
 
 
 def load_map(path: str | Path) -> NDArray[np.float64]:

@@ -9,6 +9,7 @@ must contain: the name of the input.
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,7 +19,7 @@ import numpy as np
 import pytest
 
 import hostile_files as hf
-from wavestack.cli import main
+from wavestack.cli import build_parser, error_line, main, one_line, run_command
 
 ROOT = Path(__file__).resolve().parents[2]
 HARDWARE = ROOT / "config" / "station-hardware.example.toml"
@@ -35,6 +36,17 @@ class Case:
 
 def _map(folder: Path) -> None:
     hf.npy(folder / "map.npy", np.random.default_rng(0).normal(size=(48, 48)))
+
+
+def _damaged_png(path: Path, cut: bool = False) -> None:
+    """A fringe PNG with its compressed data damaged (libpng complains on fd 2) or cut in half."""
+    frame = (120 + 100 * np.cos(0.3 * np.indices((64, 64))[1])).astype(np.uint8)
+    data = bytearray(cv2.imencode(".png", frame)[1].tobytes())
+    if cut:
+        del data[len(data) // 2:]
+    else:
+        data[60] ^= 0xFF
+    path.write_bytes(bytes(data))
 
 
 def _frames(folder: Path) -> None:
@@ -91,6 +103,9 @@ CASES = {
                              lambda d: (d / "r.dat").write_bytes(np.random.default_rng(2).bytes(2000))),
     "dat-empty": Case("fit {d}/e.dat", "e.dat", lambda d: (d / "e.dat").write_bytes(b"")),
     "png-empty": Case("analyze {d}/e.png --wavelength-nm 633", "e.png", lambda d: (d / "e.png").write_bytes(b"")),
+    "png-corrupt-idat": Case("analyze {d}/bad.png --wavelength-nm 633", "bad.png", lambda d: _damaged_png(d / "bad.png")),
+    "png-truncated": Case("analyze {d}/cut.png --wavelength-nm 633", "cut.png",
+                          lambda d: _damaged_png(d / "cut.png", cut=True)),
     "png-not-an-image": Case("analyze {d}/t.png --wavelength-nm 633", "t.png",
                              lambda d: (d / "t.png").write_text("hello")),
     "npy-pickled-object": Case("fit {d}/o.npy", "o.npy",
@@ -153,6 +168,16 @@ CASES = {
 }
 
 
+@pytest.fixture(autouse=True)
+def _nothing_written_beside_dev_null():
+    """numpy.save('/dev/null') wrote /dev/null.npy; a case that does it again fails (and is cleaned up)."""
+    existed = Path("/dev/null.npy").exists()
+    yield
+    if not existed and Path("/dev/null.npy").exists():
+        Path("/dev/null.npy").unlink()
+        pytest.fail("/dev/null.npy was written")
+
+
 def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
     try:
         status = main(argv)
@@ -163,18 +188,18 @@ def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str,
 
 
 @pytest.mark.parametrize("name", list(CASES))
-def test_hostile_input_is_one_line_naming_it(name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_hostile_input_is_one_line_naming_it(name: str, tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    # capfd: what C libraries (libpng, HDF5) print on file descriptor 2 counts as a line too
     case = CASES[name]
     case.build(tmp_path)
     argv = case.argv.format(d=tmp_path).split()
-    status, out, err = _run(argv, capsys)
+    status, out, err = _run(argv, capfd)
     lines = err.strip().splitlines()
     assert "Traceback" not in err, err
     assert status == 2, (status, err)
     assert len(lines) == 1, err
     assert case.names in lines[0], lines[0]
     assert out == ""
-    assert not Path("/dev/null.npy").exists()  # numpy.save on '/dev/null' wrote a file beside the device
 
 
 def test_record_into_a_missing_folder_fails_before_any_device_is_opened(tmp_path: Path, capsys) -> None:
@@ -185,14 +210,42 @@ def test_record_into_a_missing_folder_fails_before_any_device_is_opened(tmp_path
     assert status == 2 and "--record" in err and "device error" not in err, err
 
 
-def test_an_internal_error_is_one_line_with_exit_status_1(tmp_path: Path, capsys) -> None:
-    # a bug (here: a result the JSON writer cannot encode) must stay distinguishable from bad input
-    from wavestack.cli import error_line, one_line
+def _namespace(handler: Callable[..., int], *, verbose: bool = False) -> argparse.Namespace:
+    return argparse.Namespace(command="fit", verbose=verbose, wavefront="x.npy", subject=lambda args: "x.npy",
+                              handler=handler)
+
+
+def _raise(error: BaseException) -> Callable[..., int]:
+    def handler(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+        raise error
+    return handler
+
+
+@pytest.mark.parametrize("error, status, fragment", [
+    (ValueError("no fringes"), 2, "wavestack fit: error: x.npy: no fringes"),
+    (ValueError("x.npy: no fringes"), 2, "wavestack fit: error: x.npy: no fringes"),
+    (MemoryError(), 2, "x.npy: not enough memory"),
+    (FileNotFoundError(2, "No such file or directory", "out.npy"), 2, "out.npy: No such file"),
+    (KeyError("bug"), 1, "internal error (a bug, please report it): KeyError"),
+])
+def test_every_failure_is_one_line_with_its_exit_status(error, status, fragment, capsys) -> None:
+    assert run_command(_namespace(_raise(error)), build_parser()) == status
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and fragment in err and "Traceback" not in err, err
+    if status == 1:
+        assert "run with -v for the traceback" in err
+
+
+def test_an_internal_error_logs_its_traceback_with_verbose(capsys, caplog) -> None:
+    assert run_command(_namespace(_raise(KeyError("bug")), verbose=True), build_parser()) == 1
+    assert "run with -v" not in capsys.readouterr().err
+    assert "Traceback" in caplog.text and "KeyError: 'bug'" in caplog.text
+
+
+def test_a_message_on_several_lines_becomes_one() -> None:
     assert one_line("a\n  b\tc") == "a b c"
-    import argparse
-    args = argparse.Namespace(files=["x.png"], subject=lambda a: "x.png")
-    assert error_line(args, ValueError("no fringes")) == "x.png: no fringes"
-    assert error_line(args, ValueError("x.png: no fringes")) == "x.png: no fringes"
+    args = argparse.Namespace(files=["x.png", "y.png"], subject=lambda a: "x.png (and 1 more)")
+    assert error_line(args, ValueError("y.png: too small")) == "y.png: too small"  # names an input: kept
 
 
 def test_saved_map_goes_to_exactly_the_given_name(tmp_path: Path, capsys) -> None:

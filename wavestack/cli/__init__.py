@@ -38,7 +38,8 @@ EXIT_DEVICE_ERROR = 3
 #: The subcommands (each module declares its own), in the order ``wavestack --help`` lists them.
 COMMANDS = tuple(module.COMMAND for module in (run, replay, fit, analyze, bench, sim))
 
-__all__ = ["COMMANDS", "EXIT_BAD_INPUT", "EXIT_DEVICE_ERROR", "EXIT_INTERNAL_ERROR", "build_parser", "main"]
+__all__ = ["COMMANDS", "EXIT_BAD_INPUT", "EXIT_DEVICE_ERROR", "EXIT_INTERNAL_ERROR", "build_parser", "error_line", "main",
+           "one_line", "run_command"]
 
 
 class _Parser(argparse.ArgumentParser):
@@ -101,6 +102,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         format="%(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
+    return run_command(args, parser)
+
+
+def run_command(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Run the parsed command's handler; every failure becomes one line and its exit status.
+
+    Exit statuses: 2 bad input (a file, an option's value, a path to write: ``InputError``,
+    ``ValueError``, ``MemoryError``, an ``OSError`` naming a file), 3 a device (``DeviceError``),
+    1 an internal error (any other exception: a bug; the traceback with ``-v``), 130 interrupted,
+    141 the reader of standard output went away.
+    """
     log = logging.getLogger(__name__)
     prefix = f"wavestack {args.command}"
     try:
