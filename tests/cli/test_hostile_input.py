@@ -10,6 +10,7 @@ must contain: the name of the input.
 from __future__ import annotations
 
 import argparse
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,7 @@ import pytest
 
 import hostile_files as hf
 from wavestack.cli import build_parser, error_line, main, one_line, run_command
+from wavestack.cli.outputs import json_text
 
 ROOT = Path(__file__).resolve().parents[2]
 HARDWARE = ROOT / "config" / "station-hardware.example.toml"
@@ -165,6 +167,9 @@ CASES = {
     "run-duration-nan": Case("run --duration nan", "--duration"),
     "run-config-missing": Case("run --frames 1 --config {d}/absent.toml", "absent.toml"),
     "bench-results-zero": Case("bench station --results 0", "--results"),
+    "bench-paper-with-config": Case("bench paper --config {d}/x.toml", "--config"),
+    "bench-station-with-aperture": Case("bench station --aperture circle", "--aperture"),
+    "fit-example-with-mask": Case("fit --example --mask {d}/m.npy", "--mask"),
 }
 
 
@@ -274,3 +279,18 @@ def test_colour_frame_is_reduced_without_a_float64_copy_of_the_frame(tmp_path: P
     # the decoded image is 6 MB and the frame 2 MB; a float64 copy of the colour image alone is
     # 48 MB (the old path), the row blocks of 2^18 pixels are 6 MB each
     assert peak < 32e6, peak
+
+
+def _strict(text: str) -> object:
+    def refuse(constant: str) -> None:
+        raise AssertionError(f"bare {constant} in JSON")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_json_has_no_bare_nan_or_infinity(tmp_path: Path, capsys) -> None:
+    assert _strict(json_text({"a": float("nan"), "b": [1.0, float("inf")], "c": (-float("inf"),)})) == {
+        "a": None, "b": [1.0, None], "c": [None]}
+    _map(tmp_path)
+    assert main(["fit", str(tmp_path / "map.npy"), "--modes", "6", "--json"]) == 0
+    report = _strict(capsys.readouterr().out)
+    assert isinstance(report, dict) and len(report["coefficients"]) == 6

@@ -103,7 +103,7 @@ def _load_inputs(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str,
 def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack fit``; returns the exit status."""
     if args.example and args.mask:
-        parser.error("--mask cannot be combined with --example")
+        raise InputError("--mask cannot be combined with --example; expected one of them")
     save_to = check_output_file(args.save_fit, "--save-fit") if args.save_fit else None
     wavefront, mask, source, truth = _load_inputs(args)
     try:

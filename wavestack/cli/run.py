@@ -8,7 +8,6 @@ cleanly: the recording is flushed and closed, the devices released, the summary 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import threading
 import time
@@ -20,7 +19,7 @@ import numpy as np
 
 from wavestack.cli.arguments import positive_float, positive_int
 from wavestack.cli.command import Command
-from wavestack.cli.outputs import check_output_file
+from wavestack.cli.outputs import check_output_file, json_text
 from wavestack.cli.signals import stop_on_signals
 from wavestack.config import load_station_config
 from wavestack.recording import StationRecorder, open_recording
@@ -80,7 +79,7 @@ class JsonLines:
         self._stream = stream
 
     def __call__(self, record: CycleRecord) -> None:
-        self._stream.write(json.dumps(record.result.to_json()) + "\n")
+        self._stream.write(json_text(record.result.to_json()) + "\n")
         self._stream.flush()
 
 
@@ -123,7 +122,7 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
 
         summary = station.run(stop=stop, on_result=on_result, max_results=args.frames, duration_s=args.duration)
     if args.json:
-        out.write(json.dumps(summary.to_json()) + "\n")
+        out.write(json_text(summary.to_json()) + "\n")
     else:
         if isinstance(view, TerminalView):
             view.draw()
