@@ -223,9 +223,9 @@ def wavefront_from_phase_shifts(
     result = phase_from_frames(frames, method=method, steps=steps_rad, direction=direction)
     timings["phase"] = time.perf_counter() - tick
     level = float(np.max(np.abs(frames))) if frames.size else 0.0
-    _require_modulation(result.modulation, None, level)
+    check_fringe_modulation(result.modulation, None, level)
     finished = _finish(result.phase, result.modulation, aperture, detection, timings)
-    _require_modulation(result.modulation, finished["aperture"].mask, level)
+    check_fringe_modulation(result.modulation, finished["aperture"].mask, level)
     return MeasuredWavefront(
         method=result.method,
         steps_rad=np.asarray(result.steps),
@@ -234,8 +234,17 @@ def wavefront_from_phase_shifts(
     )
 
 
-def _require_modulation(modulation: NDArray, mask: NDArray[np.bool_] | None, level: float) -> None:
+def check_fringe_modulation(modulation: NDArray, mask: NDArray[np.bool_] | None, level: float) -> None:
     """Refuse frames without fringe modulation (everywhere, or in the median over ``mask``).
+
+    Parameters
+    ----------
+    modulation : ndarray, shape (rows, cols)
+        Fringe modulation of a phase-shifted set, intensity units.
+    mask : ndarray of bool, shape (rows, cols), optional
+        The aperture; None looks at the largest modulation anywhere.
+    level : float
+        The frames' largest absolute value, intensity units.
 
     Raises
     ------
