@@ -5,7 +5,7 @@ terms.
 from __future__ import annotations
 
 from .auto import AUTO, AUTO_MAX_NOISE_GAIN
-from .build import available_methods, build_fitter
+from .build import MAX_MODES, available_methods, build_fitter, check_basis_size
 from .conditioning import gram_condition, noise_gain, normalised_gram
 from .fitter import Fitter
 from .methods import (
@@ -25,6 +25,7 @@ from .store import FitterStore, fitter_key, load_fitter, save_fitter
 __all__ = [
     "AUTO",
     "AUTO_MAX_NOISE_GAIN",
+    "MAX_MODES",
     "FitBasis",
     "FitResult",
     "Fitter",
@@ -40,6 +41,7 @@ __all__ = [
     "Pupil",
     "Samples",
     "available_methods",
+    "check_basis_size",
     "build_canonical_map",
     "build_fitter",
     "fitter_key",

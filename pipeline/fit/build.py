@@ -31,6 +31,7 @@ from numpy.typing import DTypeLike, NDArray
 
 from .._checks import is_integer, one_of
 from ..aperture import Aperture, Topology, UnsupportedAperture
+from ..formats.limits import format_bytes, memory_budget_bytes
 from ..zernike import default_normalisation, mode_list, normalisation_factor
 from .auto import AUTO, BuildOne, advised_error, build_auto
 from .conditioning import gram_condition, noise_gain, normalised_gram
@@ -75,6 +76,40 @@ def _stored_operator(orthonormal: NDArray[np.float64], dtype: np.dtype) -> NDArr
     if orthonormal.shape[1] <= _PIXEL_MAJOR_MAX_COLUMNS:
         return np.ascontiguousarray(orthonormal, dtype=dtype)
     return np.ascontiguousarray(orthonormal.T, dtype=dtype).T
+
+
+# The largest mode count a fitter is built for: Noll 1000 reaches radial order 44, beyond any
+# interferometer's report (Zygo and 4D give 36 or 37 terms); the bound stops a typo (100000)
+# before the basis is allocated. Bounds on the memory the basis takes are checked separately.
+MAX_MODES = 1000
+# Arrays of (samples x modes) float64 alive at once while a fitter is built: the basis values,
+# their orthonormalised copy, and a work copy in the factorisation.
+_BASIS_COPIES = 3
+
+
+def check_basis_size(valid_pixels: int, modes: int, max_bytes: int | None = None) -> None:
+    """Refuse a mode count above :data:`MAX_MODES` or a basis larger than the memory budget.
+
+    Parameters
+    ----------
+    valid_pixels : int
+        Samples of the fit (the aperture's valid pixels).
+    modes : int
+    max_bytes : int, optional
+        Default: :func:`~wavestack.pipeline.formats.limits.memory_budget_bytes`.
+
+    Raises
+    ------
+    ValueError
+        Naming the mode count and the bound it exceeds.
+    """
+    if modes > MAX_MODES:
+        raise ValueError(f"modes: expected at most {MAX_MODES} (Noll {MAX_MODES} reaches radial order 44), got {modes}")
+    needed = _BASIS_COPIES * 8 * int(valid_pixels) * int(modes)
+    limit = memory_budget_bytes() if max_bytes is None else max_bytes
+    if needed > limit:
+        raise ValueError(f"modes: {modes} modes on {valid_pixels} pixels need {format_bytes(needed)} to build, more "
+                         f"than the memory budget of {format_bytes(limit)}; expected fewer modes or a smaller map")
 
 
 def _check_arguments(
@@ -220,6 +255,7 @@ def build_fitter(
         normalisation=normalisation, remove=remove, options=options,
     )
     aperture = aperture_of(aperture_or_mask)
+    check_basis_size(aperture.valid_count, int(modes))
     settings["fit_mask"] = fit_mask_of(fit_mask, aperture)
 
     def build(concrete: str, **overrides: object) -> Fitter:

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from .._checks import int_at_least, one_of
 from ..aperture import Aperture
-from ..mapping import LAPLACIANS, CanonicalMap, conformal_map, csf_qcm_map
+from ..mapping import LAPLACIANS, MAX_TARGET_VERTICES, CanonicalMap, conformal_map, csf_qcm_map
 from ..zernike import annular_zernike_basis, zernike_basis
 
 METHODS = ("circle", "qr", "conformal", "csf-qcm")
@@ -70,6 +70,9 @@ class MappingOptions:
     def __post_init__(self) -> None:
         one_of(self.laplacian, "laplacian", LAPLACIANS, voice="expected")
         int_at_least(self.mesh_vertices, "mesh_vertices", 100, voice="expected")
+        if self.mesh_vertices > MAX_TARGET_VERTICES:
+            raise ValueError(f"mesh_vertices: expected at most {MAX_TARGET_VERTICES} (a mesh finer than the pixels "
+                             f"adds nothing), got {self.mesh_vertices}")
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ References
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -22,6 +23,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
+from .hdf5_checks import check_dataset_size
+from .hdf5_guard import DEFAULT_TIMEOUT_S, read_guarded
 
 __all__ = ["DatxMap", "read_datx"]
 
@@ -68,6 +71,8 @@ _NM_PER_UNIT = MappingProxyType(
 )
 
 
+# A wavelength in metres outside (1 nm, 1 mm) is not an interferometer's (X-rays to far infrared).
+_WAVELENGTH_M = (1e-9, 1e-3)
 _GROUPS = ("Measurement", "Data")  # where the Surface and Intensity data are looked for, in order
 
 
@@ -151,13 +156,9 @@ def _attribute(node: h5py.Dataset, name: str) -> Any | None:
         holder = holder.parent
 
 
-def _masked(path: Path, node: h5py.Dataset, kind: str) -> NDArray[np.float64]:
+def _masked(path: Path, node: h5py.Dataset, kind: str, max_bytes: int | None) -> NDArray[np.float64]:
+    check_dataset_size(path, node, max_bytes)
     raw = node[()]
-    if raw.ndim != 2 or 0 in raw.shape or raw.dtype.kind not in "iuf":
-        raise InputError(
-            f"{path}: {node.name} must be a 2-D real array, "
-            f"got shape {raw.shape} dtype {raw.dtype}"
-        )
     values = raw.astype(np.float64)
     no_data = _attribute(node, "No Data")
     invalid = ~np.isfinite(values)
@@ -179,10 +180,11 @@ def _nm_per_value(path: Path, unit: str, parameters: tuple[float, ...]) -> float
     if key in ("fringes", "waves"):
         # Fringes: Parameters (.., wavelength m, S, O); Waves: (.., wavelength m, ...).
         needed = 4 if key == "fringes" else 2
-        if len(parameters) < needed or not all(p > 0 for p in parameters[1:needed]):
+        if (len(parameters) < needed or not all(p > 0 for p in parameters[1:needed])
+                or not _WAVELENGTH_M[0] < parameters[1] < _WAVELENGTH_M[1]):
             raise InputError(
                 f"{path}: surface in {unit} needs Z Converter Parameters (_, wavelength, S, O) "
-                f"with positive values, got {parameters}"
+                f"with positive values and a wavelength between 1 nm and 1 mm, got {parameters}"
             )
         return float(np.prod(parameters[1:needed])) * 1e9
     known = ", ".join([*_NM_PER_UNIT, "fringes", "waves"])
@@ -196,17 +198,17 @@ def _wavelength_nm(path: Path, node: h5py.Dataset, z_parameters: tuple[float, ..
             metres = float(_plain(value))
         except (TypeError, ValueError):
             raise InputError(f"{path}: attribute 'Wavelength' is not a number: {value!r}") from None
-        if not 1e-9 < metres < 1e-3:
+        if not _WAVELENGTH_M[0] < metres < _WAVELENGTH_M[1]:
             raise InputError(
                 f"{path}: attribute 'Wavelength' = {metres} is not a wavelength in metres"
             )
         return metres * 1e9
-    if len(z_parameters) >= 2 and 1e-9 < z_parameters[1] < 1e-3:
+    if len(z_parameters) >= 2 and _WAVELENGTH_M[0] < z_parameters[1] < _WAVELENGTH_M[1]:
         return z_parameters[1] * 1e9
     return None
 
 
-def read_datx(path: str | Path) -> DatxMap:
+def read_datx(path: str | Path, *, max_bytes: int | None = None, timeout_s: float = DEFAULT_TIMEOUT_S) -> DatxMap:
     """Read the surface (and intensity) of a Zygo Mx ``.datx`` (HDF5) file.
 
     The layout read, checked only against synthetic files written by our tests (no file from
@@ -238,6 +240,13 @@ def read_datx(path: str | Path) -> DatxMap:
     ----------
     path : str or Path
         The ``.datx`` file.
+    max_bytes : int, optional
+        The most a dataset may make this reader allocate (default: the memory budget of
+        :mod:`wavestack.pipeline.formats.limits`); a dataset must also be stored in full in the
+        file (compressed by at most ``MAX_COMPRESSION_RATIO``).
+    timeout_s : float
+        The file is read in a child process that must finish within this time
+        (:mod:`wavestack.pipeline.formats.hdf5_guard`): a damaged file can hang the HDF5 library.
 
     Returns
     -------
@@ -249,7 +258,9 @@ def read_datx(path: str | Path) -> DatxMap:
     InputError
         If the file is missing or not HDF5, has no surface dataset (the message names the
         paths tried), the surface is not a 2-D real array, its unit is missing or unknown,
-        or an attribute read above is malformed.
+        or an attribute read above is malformed, a dataset is larger than the memory budget or
+        than the file's stored bytes justify, or the HDF5 structure is damaged (link loops,
+        dangling links, unreadable chunks, a read that hangs or crashes the HDF5 library).
 
     References
     ----------
@@ -259,44 +270,66 @@ def read_datx(path: str | Path) -> DatxMap:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
+    datx = read_guarded(functools.partial(_read_file, max_bytes=max_bytes), path, timeout_s)
+    for array in (datx.surface_nm, datx.intensity):  # read-only again after the pipe
+        if array is not None:
+            array.flags.writeable = False
+    return datx
+
+
+def _read_file(path: Path, max_bytes: int | None) -> DatxMap:
+    """:func:`read_datx` in the calling process."""
     try:
         h5 = h5py.File(path, "r")
     except OSError as error:
         raise InputError(f"{path}: not a readable HDF5 (.datx) file ({error})") from None
     with h5:
-        surface = _data_node(h5, "Surface")
-        if surface is None:
-            tried = " or ".join(f"'{g}/Surface'" for g in _GROUPS)
-            raise InputError(
-                f"{path}: no surface data: expected a dataset {tried} "
-                "(or a group holding one dataset)"
-            )
-        z_value = _attribute(surface, "Z Converter")
-        if z_value is not None:
-            _, unit, z_parameters = _converter(path, "Z Converter", z_value)
-        elif (unit_value := _attribute(surface, "Unit")) is not None:
-            unit, z_parameters = str(_plain(unit_value)), ()
-        else:
-            raise InputError(
-                f"{path}: {surface.name} has neither a 'Z Converter' nor a 'Unit' attribute"
-            )
-        surface_nm = _masked(path, surface, "Surface") * _nm_per_value(path, unit, z_parameters)
-        surface_nm.flags.writeable = False
+        try:
+            return _read_open(path, h5, max_bytes)
+        except InputError:
+            raise
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError) as error:
+            # h5py's own failures on a damaged or hostile structure: link loops ("too many
+            # links"), dangling links, unreadable attributes or chunks
+            raise InputError(f"{path}: damaged .datx (HDF5) structure: {type(error).__name__}: {error}") from None
 
-        lateral: float | None = None
-        if (x_value := _attribute(surface, "X Converter")) is not None:
-            _, _, x_parameters = _converter(path, "X Converter", x_value)
-            lateral = x_parameters[1] if len(x_parameters) > 1 and x_parameters[1] > 0 else None
 
-        intensity_node = _data_node(h5, "Intensity")
-        intensity = None if intensity_node is None else _masked(path, intensity_node, "Intensity")
-        if intensity is not None:
-            intensity.flags.writeable = False
-        attributes = {str(key): _plain(value) for key, value in surface.attrs.items()}
-        return DatxMap(
-            surface_nm=surface_nm,
-            intensity=intensity,
-            wavelength_nm=_wavelength_nm(path, surface, z_parameters),
-            lateral_resolution_m=lateral,
-            attributes=attributes,
+def _read_open(path: Path, h5: h5py.File, max_bytes: int | None) -> DatxMap:
+    """:func:`read_datx` on the open file."""
+    surface = _data_node(h5, "Surface")
+    if surface is None:
+        tried = " or ".join(f"'{g}/Surface'" for g in _GROUPS)
+        raise InputError(
+            f"{path}: no surface data: expected a dataset {tried} "
+            "(or a group holding one dataset)"
         )
+    z_value = _attribute(surface, "Z Converter")
+    if z_value is not None:
+        _, unit, z_parameters = _converter(path, "Z Converter", z_value)
+    elif (unit_value := _attribute(surface, "Unit")) is not None:
+        unit, z_parameters = str(_plain(unit_value)), ()
+    else:
+        raise InputError(
+            f"{path}: {surface.name} has neither a 'Z Converter' nor a 'Unit' attribute"
+        )
+    nm_per_value = _nm_per_value(path, unit, z_parameters)
+    surface_nm = _masked(path, surface, "Surface", max_bytes) * nm_per_value
+    surface_nm.flags.writeable = False
+
+    lateral: float | None = None
+    if (x_value := _attribute(surface, "X Converter")) is not None:
+        _, _, x_parameters = _converter(path, "X Converter", x_value)
+        lateral = x_parameters[1] if len(x_parameters) > 1 and x_parameters[1] > 0 else None
+
+    intensity_node = _data_node(h5, "Intensity")
+    intensity = None if intensity_node is None else _masked(path, intensity_node, "Intensity", max_bytes)
+    if intensity is not None:
+        intensity.flags.writeable = False
+    attributes = {str(key): _plain(value) for key, value in surface.attrs.items()}
+    return DatxMap(
+        surface_nm=surface_nm,
+        intensity=intensity,
+        wavelength_nm=_wavelength_nm(path, surface, z_parameters),
+        lateral_resolution_m=lateral,
+        attributes=attributes,
+    )

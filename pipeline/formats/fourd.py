@@ -26,6 +26,7 @@ the optical path difference the file holds, for SurfaceInWaves the surface.
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
+from .hdf5_checks import check_dataset_size
+from .hdf5_guard import DEFAULT_TIMEOUT_S, read_guarded
 
 __all__ = ["FourDMap", "is_4d_file", "read_4d"]
 
@@ -91,14 +94,11 @@ def _nanometres(path: Path, name: str, value: Any, default_unit: str) -> float:
         raise InputError(f"{path}: attribute {name!r} = {_text(value)!r} is not a number") from None
 
 
-def _waves(path: Path, node: Any) -> NDArray[np.float64]:
+def _waves(path: Path, node: Any, max_bytes: int | None) -> NDArray[np.float64]:
     if not isinstance(node, h5py.Dataset):
         raise InputError(f"{path}: expected a dataset for the map, found a group at {node.name}")
-    raw = node[()]
-    if raw.ndim != 2 or 0 in raw.shape or raw.dtype.kind not in "iuf":
-        raise InputError(f"{path}: {node.name} must be a 2-D real array, got shape {raw.shape} "
-                         f"dtype {raw.dtype}")
-    waves = raw.astype(np.float64)
+    check_dataset_size(path, node, max_bytes)
+    waves = node[()].astype(np.float64)
     with np.errstate(invalid="ignore"):
         waves[~(np.abs(waves) <= INVALID_ABOVE_WAVES)] = np.nan
     return waves
@@ -117,7 +117,7 @@ def _layout_error(path: Path, h5: h5py.File) -> InputError:
     )
 
 
-def read_4d(path: str | Path) -> FourDMap:
+def read_4d(path: str | Path, *, max_bytes: int | None = None, timeout_s: float = DEFAULT_TIMEOUT_S) -> FourDMap:
     """Read the map, wavelength and pixel size of a 4D Technology 4Sight ``.h5`` file.
 
     The layouts read are described in the module docstring (:mod:`wavestack.pipeline.formats.fourd`).
@@ -126,6 +126,12 @@ def read_4d(path: str | Path) -> FourDMap:
     ----------
     path : str or Path
         The ``.h5`` file.
+    max_bytes : int, optional
+        The most the map may make this reader allocate (default: the memory budget of
+        :mod:`wavestack.pipeline.formats.limits`); it must also be stored in full in the file.
+    timeout_s : float
+        The file is read in a child process that must finish within this time
+        (:mod:`wavestack.pipeline.formats.hdf5_guard`): a damaged file can hang the HDF5 library.
 
     Returns
     -------
@@ -136,7 +142,10 @@ def read_4d(path: str | Path) -> FourDMap:
     ------
     InputError
         If the file is missing, not HDF5, of another HDF5 layout (the message lists what it
-        holds and what was expected), or its map or attributes are malformed.
+        holds and what was expected), its map or attributes are malformed, its map is larger
+        than the memory budget or than the file's stored bytes justify, or the HDF5 structure
+        is damaged (link loops, dangling links, unreadable chunks, a read that hangs or crashes
+        the HDF5 library).
 
     Examples
     --------
@@ -158,28 +167,24 @@ def read_4d(path: str | Path) -> FourDMap:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file")
+    fourd = read_guarded(functools.partial(_read_file, max_bytes=max_bytes), path, timeout_s)
+    fourd.map_nm.flags.writeable = False  # read-only again after the pipe
+    return fourd
+
+
+def _read_file(path: Path, max_bytes: int | None) -> FourDMap:
+    """:func:`read_4d` in the calling process."""
     try:
         h5 = h5py.File(path, "r")
     except OSError:
         raise InputError(f"{path}: not a readable HDF5 file; expected a 4D Technology 4Sight .h5 file") from None
     with h5:
-        if f"{_GENRAW}/data" in h5:
-            group = h5[_GENRAW]
-            if "wavelength" not in group.attrs:
-                raise InputError(f"{path}: {_GENRAW} has no 'wavelength' attribute")
-            wavelength_nm = _nanometres(path, "wavelength", group.attrs["wavelength"], "nm")
-            pixel = group.attrs.get("xpix")
-            pixel_size = _nanometres(path, "xpix", pixel, "mm") * 1e-9 if pixel is not None else None
-            waves, layout = _waves(path, group["data"]), _GENRAW
-        elif f"{_SURFACE}/Data" in h5:
-            measurement = h5["Measurement"]
-            if "WavelengthInNanometers" not in measurement.attrs:
-                raise InputError(f"{path}: Measurement has no 'WavelengthInNanometers' attribute")
-            wavelength_nm = _nanometres(path, "WavelengthInNanometers",
-                                        measurement.attrs["WavelengthInNanometers"], "nm")
-            waves, layout, pixel_size = _waves(path, h5[f"{_SURFACE}/Data"]), _SURFACE, None
-        else:
-            raise _layout_error(path, h5)
+        try:
+            wavelength_nm, pixel_size, waves, layout = _read_open(path, h5, max_bytes)
+        except InputError:
+            raise
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError) as error:
+            raise InputError(f"{path}: damaged 4D (HDF5) structure: {type(error).__name__}: {error}") from None
     if not 1.0 < wavelength_nm < 1e6:
         raise InputError(f"{path}: wavelength {wavelength_nm} nm is not a wavelength")
     if pixel_size is not None and not pixel_size > 0:
@@ -187,3 +192,25 @@ def read_4d(path: str | Path) -> FourDMap:
     map_nm = waves * wavelength_nm
     map_nm.flags.writeable = False
     return FourDMap(map_nm=map_nm, wavelength_nm=wavelength_nm, pixel_size_m=pixel_size, layout=layout)
+
+
+def _read_open(path: Path, h5: h5py.File, max_bytes: int | None) -> tuple[float, float | None, NDArray[np.float64], str]:
+    """Wavelength (nm), pixel size (m), map (waves) and layout of the open file."""
+    if f"{_GENRAW}/data" in h5:
+        group = h5[_GENRAW]
+        if "wavelength" not in group.attrs:
+            raise InputError(f"{path}: {_GENRAW} has no 'wavelength' attribute")
+        wavelength_nm = _nanometres(path, "wavelength", group.attrs["wavelength"], "nm")
+        pixel = group.attrs.get("xpix")
+        pixel_size = _nanometres(path, "xpix", pixel, "mm") * 1e-9 if pixel is not None else None
+        waves, layout = _waves(path, group["data"], max_bytes), _GENRAW
+    elif f"{_SURFACE}/Data" in h5:
+        measurement = h5["Measurement"]
+        if "WavelengthInNanometers" not in measurement.attrs:
+            raise InputError(f"{path}: Measurement has no 'WavelengthInNanometers' attribute")
+        wavelength_nm = _nanometres(path, "WavelengthInNanometers",
+                                    measurement.attrs["WavelengthInNanometers"], "nm")
+        waves, layout, pixel_size = _waves(path, h5[f"{_SURFACE}/Data"], max_bytes), _SURFACE, None
+    else:
+        raise _layout_error(path, h5)
+    return wavelength_nm, pixel_size, waves, layout

@@ -26,6 +26,10 @@ References
 from __future__ import annotations
 
 import logging
+import os
+import re
+import sys
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -34,6 +38,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
+from .image_header import declared_size
+from .limits import check_allocation, memory_budget_bytes
 
 __all__ = ["BT601_WEIGHTS_BGR", "FRAME_SUFFIXES", "read_frame", "read_frame_set"]
 
@@ -42,6 +48,11 @@ logger = logging.getLogger(__name__)
 FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 BT601_WEIGHTS_BGR = (0.114, 0.587, 0.299)  # luma weights in OpenCV's channel order B, G, R
 _COLOUR_WARNING_FRACTION = 0.02  # channel difference (fraction of full scale) that is logged
+# What the decoders say about a file they decoded only in part (libjpeg: "Premature end of JPEG
+# file", "Corrupt JPEG data"; libpng: "... error"; OpenCV: "buffer is incomplete"); warnings such
+# as libpng's "iCCP: known incorrect sRGB profile" are not damage.
+_DAMAGE = re.compile(r"premature|corrupt|incomplete|truncat|error", re.IGNORECASE)
+_LUMA_BLOCK_PIXELS = 1 << 18  # colour is converted in row blocks of about this many pixels (6 MiB float64)
 
 
 def _full_scale(image: NDArray) -> float:
@@ -62,21 +73,31 @@ def _to_gray(path: Path, image: NDArray) -> NDArray:
     first = colour[:, :, 0]
     if np.array_equal(first, colour[:, :, 1]) and np.array_equal(first, colour[:, :, 2]):
         return first.copy()
-    as_float = colour.astype(np.float64)
-    spread = float(np.nanmax(as_float.max(axis=2) - as_float.min(axis=2)))
+    gray = np.empty(first.shape, dtype=image.dtype)
+    spread = 0.0
+    rows = max(1, _LUMA_BLOCK_PIXELS // max(1, first.shape[1]))
+    for start in range(0, first.shape[0], rows):  # float64 in row blocks, never the whole frame
+        block = colour[start:start + rows].astype(np.float64)
+        spread = max(spread, float(np.nanmax(block.max(axis=2) - block.min(axis=2))))
+        gray[start:start + rows] = _luma(block, image.dtype)
     coloured = spread > _COLOUR_WARNING_FRACTION * _full_scale(image)
     logger.log(
         logging.WARNING if coloured else logging.DEBUG,
         "%s: colour channels differ by up to %g; converted to BT.601 luma", path, spread,
     )
-    luma = as_float @ np.asarray(BT601_WEIGHTS_BGR)
-    if np.issubdtype(image.dtype, np.integer):
-        info = np.iinfo(image.dtype)
-        return np.clip(np.rint(luma), info.min, info.max).astype(image.dtype)
-    return luma.astype(image.dtype)
+    return gray
 
 
-def read_frame(path: str | Path) -> NDArray:
+def _luma(block: NDArray[np.float64], dtype: np.dtype) -> NDArray:
+    """BT.601 luma of a (rows, cols, 3) BGR block, rounded back to ``dtype`` for integers."""
+    luma = block @ np.asarray(BT601_WEIGHTS_BGR)
+    if np.issubdtype(dtype, np.integer):
+        info = np.iinfo(dtype)
+        return np.clip(np.rint(luma), info.min, info.max).astype(dtype)
+    return luma.astype(dtype)
+
+
+def read_frame(path: str | Path, *, max_bytes: int | None = None) -> NDArray:
     """Read one camera frame as a 2-D array.
 
     Parameters
@@ -84,6 +105,11 @@ def read_frame(path: str | Path) -> NDArray:
     path : str or Path
         A PNG, TIFF, JPEG or BMP file (suffixes in :data:`FRAME_SUFFIXES`), grey or colour,
         8 or 16 bit, or 32-bit float TIFF.
+    max_bytes : int, optional
+        The most the frame may make this reader allocate, checked from the header before
+        anything is decoded: the decoded image plus one float64 copy of the frame, which the
+        analysis makes (default: the memory budget of
+        :mod:`wavestack.pipeline.formats.limits`).
 
     Returns
     -------
@@ -94,7 +120,8 @@ def read_frame(path: str | Path) -> NDArray:
     Raises
     ------
     InputError
-        If the file is missing, has another suffix, cannot be decoded as an image, or does
+        If the file is missing, has another suffix, has a header that does not say its size,
+        declares a frame larger than ``max_bytes``, cannot be decoded as an image, or does
         not hold a single 2-D frame (grey, grey + alpha, BGR or BGRA).
 
     References
@@ -107,9 +134,7 @@ def read_frame(path: str | Path) -> NDArray:
         raise InputError(f"{path}: no such file")
     if path.suffix.lower() not in FRAME_SUFFIXES:
         raise InputError(f"{path}: expected an image file ({', '.join(FRAME_SUFFIXES)})")
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None or image.size == 0:
-        raise InputError(f"{path}: not a readable image")
+    image = decode_image(path, max_bytes)
     if image.ndim == 3 and image.shape[2] in (1, 2, 3, 4):
         image = _to_gray(path, image)
     if image.ndim != 2:
@@ -119,13 +144,70 @@ def read_frame(path: str | Path) -> NDArray:
     return image
 
 
-def read_frame_set(paths: Sequence[str | Path]) -> NDArray:
+def decode_image(path: Path, max_bytes: int | None = None) -> NDArray:
+    """The image as OpenCV decodes it (``IMREAD_UNCHANGED``), once its header's size is within budget.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read, its header does not say its size, it declares more than
+        ``max_bytes`` (decoded image plus one float64 copy), or it does not decode.
+    """
+    budget = memory_budget_bytes() if max_bytes is None else max_bytes
+    try:
+        check_allocation(path, "image file", (path.stat().st_size,), 1, budget)
+        data = path.read_bytes()
+    except OSError as error:
+        raise InputError(f"{path}: cannot read the file ({error.strerror})") from None
+    size = declared_size(data)
+    if size is None:
+        raise InputError(f"{path}: not a readable image (no PNG, JPEG, TIFF or BMP header that gives its size: "
+                         "another kind of file, or damaged or truncated)")
+    check_allocation(path, "image", (size.height, size.width),
+                     size.channels * size.bytes_per_sample + 8, budget - len(data))
+    image, complaints = _decode_quietly(data)
+    if image is None or image.size == 0:
+        raise InputError(f"{path}: not a readable image" + (f" ({complaints})" if complaints else ""))
+    if _DAMAGE.search(complaints):  # decoded in part: the rest would be filled in, not measured
+        raise InputError(f"{path}: damaged image, decoded only in part ({complaints})")
+    if complaints:
+        logger.warning("%s: %s", path, complaints)
+    return image
+
+
+def _decode_quietly(data: bytes) -> tuple[NDArray | None, str]:
+    """``cv2.imdecode`` with what the decoders print on file descriptor 2 taken into the result.
+
+    libpng and OpenCV write their complaints about a damaged file ("libpng error: IDAT:
+    incorrect data check") to the process's standard error, beside the command's one line; they
+    are captured here and returned as one line for the caller's message. The descriptor is
+    redirected for the duration of the decode only, so another thread's writes to standard error
+    during it would land in the message too (the command line decodes files in one thread).
+    """
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        sink.seek(0)
+        text = sink.read(4096).decode("utf-8", errors="replace")
+    return image, "; ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
+def read_frame_set(paths: Sequence[str | Path], *, max_bytes: int | None = None) -> NDArray:
     """Read several frames of equal shape and dtype into one stack.
 
     Parameters
     ----------
     paths : sequence of str or Path
         The frames, in the order wanted (e.g. of the phase steps).
+    max_bytes : int, optional
+        The most the set may make this reader allocate, shared equally by the frames (see
+        :func:`read_frame`).
 
     Returns
     -------
@@ -142,11 +224,12 @@ def read_frame_set(paths: Sequence[str | Path]) -> NDArray:
     paths = [Path(p) for p in paths]
     if not paths:
         raise InputError("read_frame_set: no files given; expected at least one frame")
-    first = read_frame(paths[0])
+    per_frame = (memory_budget_bytes() if max_bytes is None else max_bytes) // len(paths)
+    first = read_frame(paths[0], max_bytes=per_frame)
     stack = np.empty((len(paths), *first.shape), dtype=first.dtype)
     stack[0] = first
     for index, path in enumerate(paths[1:], start=1):
-        frame = read_frame(path)
+        frame = read_frame(path, max_bytes=per_frame)
         if frame.shape != first.shape:
             raise InputError(
                 f"{path}: frame shape {frame.shape} differs from the shape {first.shape} "

@@ -6,14 +6,17 @@ so that a command line can print it as one line.
 
 from __future__ import annotations
 
+import io
+import tokenize
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
-from .measured import MEASURED_MAP_SUFFIXES, read_measured_map, unsupported_reason
+from .images import decode_image
+from .limits import check_allocation
+from .measured import MEASURED_MAP_SUFFIXES, check_magnitude, read_measured_map, unsupported_reason
 
 __all__ = ["InputError", "load_map", "load_mask"]
 
@@ -27,11 +30,42 @@ def _existing(path: str | Path) -> Path:
     return path
 
 
+_NPY_HEADER_BYTES = 65536  # numpy writes headers of at most a few hundred bytes; its reader refuses > 10000
+
+
 def _load_npy(path: Path) -> NDArray:
+    """The array, once its header's shape is within the memory budget and the file holds its bytes.
+
+    The header is parsed from at most the file's first 64 KiB held in memory, so a header that
+    declares a huge length of itself cannot make the reader ask for that many bytes.
+    """
     try:
+        with open(path, "rb") as stream:
+            head = io.BytesIO(stream.read(_NPY_HEADER_BYTES))
+        version = np.lib.format.read_magic(head)
+        if version not in ((1, 0), (2, 0), (3, 0)):
+            raise ValueError(f"format version {version[0]}.{version[1]} is none of 1.0, 2.0, 3.0")
+        read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                       else np.lib.format.read_array_header_2_0)
+        shape, _, dtype = read_header(head)
+        if dtype.hasobject:
+            raise ValueError(f"dtype {dtype} holds Python objects")
+        check_allocation(path, ".npy array", shape, dtype.itemsize + 8)
+        stored = path.stat().st_size - head.tell()
+        needed = int(np.prod(shape)) * dtype.itemsize
+        if stored < needed:
+            raise InputError(f"{path}: truncated .npy file: its header declares {shape} {dtype} ({needed} bytes), "
+                             f"the file holds {stored}")
         return np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as error:
-        raise InputError(f"{path}: not a readable .npy array ({error})") from None
+    except InputError:
+        raise
+    except (ValueError, OSError, EOFError, TypeError, SyntaxError, tokenize.TokenError) as error:
+        raise InputError(f"{path}: not a readable .npy array ({_one_line(error)})") from None
+
+
+def _one_line(error: BaseException) -> str:
+    """An exception's message on one line."""
+    return " ".join(str(error).split()) or type(error).__name__
 
 
 def load_map(path: str | Path) -> NDArray[np.float64]:
@@ -54,7 +88,8 @@ def load_map(path: str | Path) -> NDArray[np.float64]:
     ------
     InputError
         If the file is missing or unreadable, of an unsupported kind (said first), not 2-D,
-        not real-valued, or has no finite value.
+        not real-valued, has no finite value or a value beyond ``MAX_MAP_MAGNITUDE``, or
+        declares an array larger than the memory budget or than the file holds.
     """
     path = _existing(path)
     suffix = path.suffix.lower()
@@ -69,8 +104,10 @@ def load_map(path: str | Path) -> NDArray[np.float64]:
     if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
         raise InputError(f"{path}: expected real numbers, got dtype {array.dtype}")
     array = array.astype(np.float64)
-    if not np.isfinite(array).any():
+    finite = np.isfinite(array)
+    if not finite.any():
         raise InputError(f"{path}: every value is NaN or infinite; expected a map with valid pixels")
+    check_magnitude(path, array[finite])
     return array
 
 
@@ -101,9 +138,7 @@ def load_mask(path: str | Path, shape: tuple[int, int] | None = None) -> NDArray
         if array.dtype == object or np.iscomplexobj(array):
             raise InputError(f"{path}: expected a real or boolean mask, got dtype {array.dtype}")
     elif suffix in _IMAGE_SUFFIXES:
-        array = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if array is None:
-            raise InputError(f"{path}: not a readable image")
+        array = decode_image(path)
         if array.ndim == 3:
             array = array.any(axis=2)
     else:

@@ -19,7 +19,8 @@ from .errors import InputError
 from .fourd import read_4d
 from .metropro import read_metropro_dat
 
-__all__ = ["MEASURED_MAP_SUFFIXES", "SUPPORTED_FILES", "MeasuredMap", "read_measured_map", "unsupported_reason"]
+__all__ = ["MAX_MAP_MAGNITUDE", "MEASURED_MAP_SUFFIXES", "SUPPORTED_FILES", "MeasuredMap", "check_magnitude",
+           "read_measured_map", "unsupported_reason"]
 
 MEASURED_MAP_SUFFIXES = (".dat", ".datx", ".h5")
 SUPPORTED_FILES = ".npy, .dat, .datx, 4D .h5, or images"
@@ -31,6 +32,12 @@ _KNOWN_UNSUPPORTED = MappingProxyType({
     ".asc": "ASCII files", ".xyz": "XYZ point files", ".npz": ".npz archives", ".4d": ".4D files",
     ".opd": "Wyko .opd files", ".sdf": "surface data files",
 })
+
+
+# A map value beyond this magnitude (in any unit: nm, waves, metres) is not a measurement; its
+# square still fits float64 many times over, so the fit's sums stay finite.
+MAX_MAP_MAGNITUDE = 1e15
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,8 +107,8 @@ def read_measured_map(path: str | Path) -> MeasuredMap:
     Raises
     ------
     InputError
-        For an unsupported suffix (said first), an unreadable file, or a file without a valid
-        pixel.
+        For an unsupported suffix (said first), an unreadable file, a file without a valid
+        pixel, or a value beyond ``MAX_MAP_MAGNITUDE`` nanometres.
 
     Examples
     --------
@@ -128,5 +135,20 @@ def read_measured_map(path: str | Path) -> MeasuredMap:
     valid = np.isfinite(map_nm)
     if not valid.any():
         raise InputError(f"{path}: no valid pixel; expected a map with measured pixels")
+    check_magnitude(path, map_nm[valid])
     valid.flags.writeable = False
     return MeasuredMap(map_nm=map_nm, valid=valid, wavelength_nm=wavelength, pixel_size_m=pixel, kind=kind)
+
+
+def check_magnitude(path: str | Path, values: NDArray[np.float64]) -> None:
+    """Refuse map values beyond :data:`MAX_MAP_MAGNITUDE` (finite values only).
+
+    Raises
+    ------
+    InputError
+        Naming the file, the largest magnitude and the bound.
+    """
+    largest = float(np.max(np.abs(values))) if values.size else 0.0
+    if largest > MAX_MAP_MAGNITUDE:
+        raise InputError(f"{path}: a value of magnitude {largest:.3g} is not a measurement; expected map values "
+                         f"within +-{MAX_MAP_MAGNITUDE:g}")

@@ -57,6 +57,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .errors import InputError
+from .limits import check_allocation
 from .metropro_header import METROPRO_MAGIC, _parse_header, MetroProHeader
 
 __all__ = [
@@ -140,7 +141,16 @@ def _check_sizes(path: Path, header: MetroProHeader, file_bytes: int) -> None:
         logger.debug("%s: %d bytes after the phase data ignored", path, file_bytes - needed)
 
 
+# A wavelength in metres outside (1 nm, 1 mm) is not an interferometer's (X-rays to far infrared).
+_WAVELENGTH_M = (1e-9, 1e-3)
+
+
 def _length_per_count_nm(path: Path, header: MetroProHeader) -> float:
+    if not _WAVELENGTH_M[0] < header.wavelength_in < _WAVELENGTH_M[1]:
+        raise InputError(
+            f"{path}: MetroPro wavelength_in {header.wavelength_in} m is not a wavelength; expected "
+            f"between {_WAVELENGTH_M[0]:g} and {_WAVELENGTH_M[1]:g} m"
+        )
     scale = header.intf_scale_factor * header.obliquity_factor / header.phase_resolution
     nm_per_count = scale * header.wavelength_in * 1e9
     if not (np.isfinite(nm_per_count) and nm_per_count > 0):
@@ -152,13 +162,17 @@ def _length_per_count_nm(path: Path, header: MetroProHeader) -> float:
     return nm_per_count
 
 
-def read_metropro_dat(path: str | Path) -> MetroProMap:
+def read_metropro_dat(path: str | Path, *, max_bytes: int | None = None) -> MetroProMap:
     """Read a Zygo MetroPro ``.dat`` file (header format 1, 2 or 3).
 
     Parameters
     ----------
     path : str or Path
         The ``.dat`` file.
+    max_bytes : int, optional
+        The most this reader may allocate (default: the memory budget of
+        :mod:`wavestack.pipeline.formats.limits`): the file's bytes plus the float64 phase map,
+        which the header's byte counts tie to the file's size.
 
     Returns
     -------
@@ -173,8 +187,9 @@ def read_metropro_dat(path: str | Path) -> MetroProMap:
     InputError
         If the file is missing, its magic number is not a MetroPro one, its header format
         is not 1, 2 or 3, its header is inconsistent (format, size, byte counts, phase
-        resolution flag, non-positive scale factors), or it is shorter than the header says
-        its arrays need. The message names the file.
+        resolution flag, non-positive scale factors, a wavelength outside 1 nm to 1 mm), it is
+        shorter than the header says its arrays need, or larger than the memory budget. The
+        message names the file.
 
     Notes
     -----
@@ -191,6 +206,8 @@ def read_metropro_dat(path: str | Path) -> MetroProMap:
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     try:
+        # the file is read whole, then its phase counts become float64: about 3 times its size
+        check_allocation(path, "file", (path.stat().st_size,), 3, max_bytes)
         data = path.read_bytes()
     except OSError as error:
         raise InputError(f"{path}: cannot read the file ({error})") from None

@@ -11,7 +11,7 @@ from .canonical_map import CanonicalMap, align_rotation, clamp_to_domain, point_
 from .conformal import conformal_map
 from .csf import CurveFlow, curve_shortening_flow
 from .laplacian import LAPLACIANS, DirichletSolver, cotangent_laplacian, graph_laplacian
-from .mesh import TriMesh, mesh_aperture
+from .mesh import MAX_TARGET_VERTICES, TriMesh, mesh_aperture
 from .mesh_calculus import gradients, hat_gradients, least_squares_potential, rotate90, triangle_areas
 from .modulus import (
     ConformalModulus,
@@ -29,6 +29,7 @@ __all__ = [
     "DirichletSolver",
     "HarmonicAngle",
     "LAPLACIANS",
+    "MAX_TARGET_VERTICES",
     "MapQuality",
     "PixelLocation",
     "TriMesh",

@@ -59,12 +59,16 @@ from .mesh_boundary import _Curve, _loop_indices, _split
 from .mesh_geometry import _corner_angles, _member, _polygon_area, _signed_areas, _unique_edges
 from .mesh_lattice import _encroaching, _Lattice, _missing_chords, _points_for_target, _triangulate
 
-__all__ = ["TriMesh", "mesh_aperture"]
+__all__ = ["MAX_TARGET_VERTICES", "TriMesh", "mesh_aperture"]
 
 logger = logging.getLogger(__name__)
 
 _REPAIR_ROUNDS = 10  # boundary-recovery rounds before giving up
 _MIN_TARGET = 16  # smallest accepted target_vertices
+# Largest accepted target_vertices: a mesh finer than the pixels adds nothing to a map sampled on
+# them, and 10^6 vertices is already the pixel grid of a 1000 x 1000 aperture; the bound stops a
+# typo (10^8) before the lattice of that many points is allocated (1.5 GiB at 10^8).
+MAX_TARGET_VERTICES = 1_000_000
 _AREA_RTOL = 1e-9  # relative tolerance of the check "triangle areas add up to the domain"
 
 
@@ -166,7 +170,7 @@ def mesh_aperture(aperture: Aperture, target_vertices: int = 15000) -> TriMesh:
     UnsupportedAperture
         If the aperture has several components or several holes.
     ValueError
-        If ``target_vertices`` is not an integer >= 16.
+        If ``target_vertices`` is not an integer from 16 to ``MAX_TARGET_VERTICES`` (10^6).
     RuntimeError
         If Delaunay does not recover the boundary after several rounds of splitting the
         missing chords (a gap far narrower than ``h``), or the result fails the conformity
@@ -286,5 +290,9 @@ def _check_mesh(
 
 
 def _validated_target(target_vertices: int) -> int:
-    """Check ``target_vertices`` and return it as an int."""
-    return int_at_least(target_vertices, "target_vertices", _MIN_TARGET, voice="is")
+    """Check ``target_vertices`` (16 to ``MAX_TARGET_VERTICES``) and return it as an int."""
+    target = int_at_least(target_vertices, "target_vertices", _MIN_TARGET, voice="is")
+    if target > MAX_TARGET_VERTICES:
+        raise ValueError(f"target_vertices is {target}; expected at most {MAX_TARGET_VERTICES} "
+                         "(a mesh finer than the pixels adds nothing)")
+    return target

@@ -7,6 +7,7 @@ from __future__ import annotations
 from .carrier import CarrierResult, carrier_phase
 from .measurement import (
     MeasuredWavefront,
+    check_fringe_modulation,
     local_fringe_contrast,
     wavefront_from_carrier,
     wavefront_from_phase_shifts,
@@ -59,6 +60,7 @@ __all__ = [
     "unwrap_spatial",
     "wavefront_from_carrier",
     "wavefront_from_phase_shifts",
+    "check_fringe_modulation",
     "wavefront_to_surface",
     "waves_to_nm",
     "waves_to_phase",

@@ -37,6 +37,9 @@ from .spatial_unwrap import SpatialParams, unwrap_spatial
 # 0.3 rad RMS noise); unwrapping a lightly smoothed copy and snapping each raw pixel to the
 # nearest 2 pi k keeps it under a second and leaves correctly unwrapped pixels unchanged.
 _UNWRAP = SpatialParams(prefilter_sigma_px=1.5)
+# Modulation below this fraction of the frames' largest value is none: identical frames give
+# about 1e-15 (rounding), while one count of an 8-bit camera is 4e-3 of full scale.
+_NO_MODULATION = 1e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -205,6 +208,12 @@ def wavefront_from_phase_shifts(
     Returns
     -------
     MeasuredWavefront
+
+    Raises
+    ------
+    ValueError
+        If the frames show no fringe modulation (e.g. identical frames), anywhere or in the
+        median over the aperture.
     """
     frames = np.asarray(frames)
     timings: dict[str, float] = {}
@@ -213,12 +222,42 @@ def wavefront_from_phase_shifts(
         steps_rad = 2.0 * np.pi * np.arange(frames.shape[0]) / frames.shape[0]
     result = phase_from_frames(frames, method=method, steps=steps_rad, direction=direction)
     timings["phase"] = time.perf_counter() - tick
+    level = float(np.max(np.abs(frames))) if frames.size else 0.0
+    check_fringe_modulation(result.modulation, None, level)
+    finished = _finish(result.phase, result.modulation, aperture, detection, timings)
+    check_fringe_modulation(result.modulation, finished["aperture"].mask, level)
     return MeasuredWavefront(
         method=result.method,
         steps_rad=np.asarray(result.steps),
         modulation=result.modulation,
-        **_finish(result.phase, result.modulation, aperture, detection, timings),
+        **finished,
     )
+
+
+def check_fringe_modulation(modulation: NDArray, mask: NDArray[np.bool_] | None, level: float) -> None:
+    """Refuse frames without fringe modulation (everywhere, or in the median over ``mask``).
+
+    Parameters
+    ----------
+    modulation : ndarray, shape (rows, cols)
+        Fringe modulation of a phase-shifted set, intensity units.
+    mask : ndarray of bool, shape (rows, cols), optional
+        The aperture; None looks at the largest modulation anywhere.
+    level : float
+        The frames' largest absolute value, intensity units.
+
+    Raises
+    ------
+    ValueError
+        If the modulation is at most ``_NO_MODULATION`` times ``level`` (the frames' largest
+        value): identical frames hold no phase, and their "flat" map would be a fiction.
+    """
+    values = np.asarray(modulation, dtype=np.float64)
+    where = "" if mask is None else " in the aperture (median)"
+    found = float(np.nanmax(values)) if mask is None else float(np.nanmedian(values[mask]))
+    if not found > _NO_MODULATION * level:
+        raise ValueError(f"the frames show no fringe modulation{where} ({found:.3g} against frame values up to "
+                         f"{level:.3g}); expected phase-shifted fringes, not identical frames")
 
 
 def wavefront_from_carrier(

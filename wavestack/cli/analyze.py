@@ -8,7 +8,6 @@ exactly the pixels it marks valid (:mod:`wavestack.cli.measured_map`).
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 from typing import Any
@@ -18,7 +17,9 @@ import numpy as np
 from wavestack.cli.analyze_aperture import add_aperture_arguments, aperture_choice, aperture_report
 from wavestack.cli.analyze_aperture import format_aperture, refuse_for_measured_map
 from wavestack.cli.analyze_sh import add_shack_hartmann_arguments, requested as shack_hartmann, run_shack_hartmann
-from wavestack.cli.arguments import positive_int
+from wavestack.cli.arguments import finite_float, positive_finite_float, wavelength_nm
+from wavestack.cli.fit import MODES_ARGUMENT
+from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
 from wavestack.cli.command import Command
 from wavestack.cli.measured_map import ANALYZE_FLAGS, MapPixels, add_fit_method_argument, advised, fit_mask_of
 from wavestack.cli.measured_map import map_lines, map_report, read_map_wavefront, reject_unsupported
@@ -35,6 +36,8 @@ def _steps_argument(text: str) -> np.ndarray:
         values = np.array([float(v) for v in text.split(",")])
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected phase steps in degrees, e.g. 0,60,120, got {text!r}") from None
+    if not np.isfinite(values).all():
+        raise argparse.ArgumentTypeError(f"expected finite phase steps in degrees, e.g. 0,60,120, got {text!r}")
     return np.deg2rad(values)
 
 
@@ -48,16 +51,17 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--direction", choices=("ccw", "cw"), default="ccw", help="phase-step direction (ccw)")
     parser.add_argument("--carrier-sign", type=int, choices=(1, -1), default=1,
                         help="sign of a single carrier frame's phase (+1 or -1, for the tilt direction)")
-    parser.add_argument("--wavelength-nm", type=float, help="test wavelength (required for images; files carry it)")
-    parser.add_argument("--modes", type=positive_int, default=36)
+    parser.add_argument("--wavelength-nm", type=wavelength_nm,
+                        help="test wavelength, 1 nm to 1 mm (required for images; files carry it)")
+    parser.add_argument("--modes", type=MODES_ARGUMENT, default=36)
     parser.add_argument("--ordering", choices=("noll", "ansi", "fringe"), default="noll")
     add_fit_method_argument(parser, "--fit-method", [m for m in available_methods() if m != "conformal"])
     parser.add_argument("--remove", choices=("ptt", "pttp"), help="remove piston/tilt(/power) before reporting")
-    parser.add_argument("--null-conic", type=float, metavar="K",
+    parser.add_argument("--null-conic", type=finite_float, metavar="K",
                         help="subtract the wavefront a conic of constant K shows at its centre of curvature "
                              "(needs --roc-mm and --diameter-mm)")
-    parser.add_argument("--roc-mm", type=float, help="mirror radius of curvature, mm (for the null and the implied conic)")
-    parser.add_argument("--diameter-mm", type=float, help="diameter of the analysed aperture, mm")
+    parser.add_argument("--roc-mm", type=positive_finite_float, help="mirror radius of curvature, mm (for the null and the implied conic)")
+    parser.add_argument("--diameter-mm", type=positive_finite_float, help="diameter of the analysed aperture, mm")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--save-map", metavar="OUT.npy", help="save the analysed wavefront (waves, NaN outside)")
     add_aperture_arguments(parser)
@@ -124,13 +128,13 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             raise InputError(f"{args.files[0]}: --aperture and --mask apply to interferograms, not to a "
                              "Shack-Hartmann spot image (its pupil is --pupil-px)")
         return run_shack_hartmann(args)
+    save_to = check_output_file(args.save_map, "--save-map") if args.save_map else None
     try:
         measured, wavelength_nm, pixels = _measure(args)
     except InputError:
         raise
     except ValueError as error:  # the data, not the file, is unusable: say which input
-        files = args.files[0] if len(args.files) == 1 else f"{args.files[0]} (and {len(args.files) - 1} more)"
-        raise InputError(f"{files}: {error}") from None
+        raise InputError(f"{_subject(args)}: {error}") from None
     aperture: Aperture = measured.aperture
     waves = np.where(aperture.mask, measured.waves, np.nan)
     test = _null_test(args, wavelength_nm)
@@ -154,9 +158,10 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         raise advised(error, args.files[0], ANALYZE_FLAGS) from None
     result = fitter.fit(waves, nan_policy="omit", residual=True)
     timings["fit"] = time.perf_counter() - tick
+    require_finite(_subject(args), "fit", [*result.coefficients, result.residual_rms])
     analysed = result.residual_map + fitter.surface(result.coefficients)  # the map less removed terms
-    if args.save_map:
-        np.save(args.save_map, analysed)
+    if save_to is not None:
+        save_npy(save_to, analysed)
     rms, pv = float(np.nanstd(analysed)), float(np.nanmax(analysed) - np.nanmin(analysed))
     report.update({
         "wavelength_nm": wavelength_nm,
@@ -174,8 +179,13 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if result.removed is not None:
         report["removed"] = result.removed.as_dict()
     map_report(report, pixels, result.valid_count)
-    print(json.dumps(report) if args.json else _format(report))
+    print(json_text(report) if args.json else _format(report))
     return 0
+
+
+def _subject(args: argparse.Namespace) -> str:
+    """The input files, as error messages name them."""
+    return args.files[0] if len(args.files) == 1 else f"{args.files[0]} (and {len(args.files) - 1} more)"
 
 
 def _format(report: dict[str, Any]) -> str:
@@ -203,5 +213,5 @@ COMMAND = Command(
     "analyze",
     help="interferograms (a phase-shifted set or one carrier frame) or a .dat/.datx file to Zernike terms",
     description="Analyse interferograms or instrument files: phase, aperture, unwrap, fit.",
-    add_arguments=add_analyze_arguments, handler=run_analyze,
+    add_arguments=add_analyze_arguments, handler=run_analyze, subject=_subject,
 )

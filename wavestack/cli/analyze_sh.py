@@ -17,13 +17,13 @@ reported as null; defocus shows as the spots' pitch against the described one.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from wavestack.cli.arguments import positive_float
+from wavestack.cli.arguments import positive_finite_float
+from wavestack.cli.outputs import json_text
 from wavestack.pipeline import InputError, mode_list, mode_name, normalisation_factor, default_normalisation
 from wavestack.pipeline import read_frame
 from wavestack.pipeline.shack_hartmann import (
@@ -40,11 +40,11 @@ def add_shack_hartmann_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("Shack-Hartmann spot images (one FILE; a reference or a lenslet pitch)")
     group.add_argument("--reference", metavar="REF", help="spot image of a flat wavefront: slopes are the spot "
                                                           "displacements against its spots")
-    group.add_argument("--lenslet-pitch-um", type=positive_float, metavar="P",
+    group.add_argument("--lenslet-pitch-um", type=positive_finite_float, metavar="P",
                        help="lenslet pitch, um: without --reference the lenslet centres are the lattice found "
                             "in FILE at this pitch (tilt is then not measured)")
-    group.add_argument("--focal-length-mm", type=positive_float, metavar="F", help="lenslet focal length, mm")
-    group.add_argument("--pixel-um", type=positive_float, metavar="S", help="camera pixel size, um")
+    group.add_argument("--focal-length-mm", type=positive_finite_float, metavar="F", help="lenslet focal length, mm")
+    group.add_argument("--pixel-um", type=positive_finite_float, metavar="S", help="camera pixel size, um")
     group.add_argument("--pupil-px", metavar="CX,CY,R", type=_pupil_argument,
                        help="Zernike disk in pixels (CX column, CY row); default: the disk the used lenslets cover")
 
@@ -74,7 +74,7 @@ def run_shack_hartmann(args: argparse.Namespace) -> int:
     else:
         lattice, reference, spots = _against_description(path, frame, args)
     report = _reconstruct(path, lattice, reference, spots, args)
-    print(json.dumps(report) if args.json else _format(report))
+    print(json_text(report) if args.json else _format(report))
     return 0
 
 

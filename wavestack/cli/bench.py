@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from wavestack.bench import (
@@ -20,7 +19,9 @@ from wavestack.bench import (
 )
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
+from wavestack.cli.outputs import json_text
 from wavestack.config import load_station_config
+from wavestack.pipeline import InputError
 
 def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``wavestack bench``."""
@@ -41,13 +42,13 @@ def run_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack bench``; returns the exit status."""
     if args.target == "station":
         if args.aperture:
-            parser.error("--aperture belongs to 'bench paper'")
+            raise InputError("--aperture applies to 'bench paper' only, not to 'bench station'")
         return run_station_bench(args)
     if args.config is not None:
-        parser.error("--config belongs to 'bench station'")
+        raise InputError("--config applies to 'bench station' only, not to 'bench paper'")
     rows = run_paper_benchmark(tuple(args.aperture) if args.aperture else None)
     if args.json:
-        print(json.dumps({"benchmark": "paper", "rows": rows_as_json(rows)}))
+        print(json_text({"benchmark": "paper", "rows": rows_as_json(rows)}))
     else:
         print(format_markdown(rows))
     return 0
@@ -68,7 +69,7 @@ def run_station_bench(args: argparse.Namespace) -> int:
     machine = machine_state()
     figures = [measure_path(name, path_config, args.results) for name, path_config in paths]
     if getattr(args, "json", False):
-        print(json.dumps({"benchmark": "station", "config": config.source, "machine": machine.to_json(),
+        print(json_text({"benchmark": "station", "config": config.source, "machine": machine.to_json(),
                           "targets": targets(), "paths": figures_json(figures)}))
     else:
         print("\n".join(format_figures(config.source, figures, machine)))
@@ -81,4 +82,5 @@ COMMAND = Command(
     description="Benchmarks that print figures: 'paper' rebuilds the seed paper's tables, 'station' "
                 "measures the simulated station (results per second, latency, stages, aperture change).",
     add_arguments=add_bench_arguments, handler=run_bench,
+    subject=lambda args: str(args.config) if args.config else f"bench {args.target}",
 )

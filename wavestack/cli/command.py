@@ -23,6 +23,10 @@ class Command:
         Declares the command's options on its sub-parser.
     handler : callable
         ``handler(args, parser)`` runs the command and returns the exit status.
+    subject : callable, optional
+        ``subject(args)`` names the command's main input (a file, a configuration); an error
+        message that does not start with an input of the command line gets it as a prefix, so
+        that every one-line error names what it is about.
     """
 
     name: str
@@ -30,10 +34,11 @@ class Command:
     description: str
     add_arguments: Callable[[argparse.ArgumentParser], None]
     handler: Callable[[argparse.Namespace, argparse.ArgumentParser], int]
+    subject: Callable[[argparse.Namespace], str] | None = None
 
     def register(self, commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> argparse.ArgumentParser:
         """Add this command's sub-parser to ``commands``; returns it."""
         parser = commands.add_parser(self.name, help=self.help, description=self.description)
         self.add_arguments(parser)
-        parser.set_defaults(handler=self.handler)
+        parser.set_defaults(handler=self.handler, subject=self.subject)
         return parser

@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from typing import Any
 
 import numpy as np
 
-from wavestack.cli.arguments import positive_int
+from wavestack.cli.arguments import bounded_int
 from wavestack.cli.command import Command
 from wavestack.cli.example import synthetic_example
 from wavestack.cli.measured_map import FIT_FLAGS, add_fit_method_argument, advised
+from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
 from wavestack.pipeline import (
     Aperture,
     FitResult,
@@ -26,13 +26,18 @@ from wavestack.pipeline import (
     load_mask,
 )
 from wavestack.pipeline import mode_name
-from wavestack.pipeline.fit import AUTO_MAX_NOISE_GAIN
+from wavestack.pipeline.fit import AUTO_MAX_NOISE_GAIN, MAX_MODES
+from wavestack.pipeline.mapping import MAX_TARGET_VERTICES
 
 _DTYPES = {"float64": np.float64, "float32": np.float32}
 # Above this coefficient noise amplification the human report warns that single coefficients
 # mean little (100: 0.01 waves of pixel noise become ~1 wave of coefficient scatter at N/M ~ 1e4);
 # the same level at which the `auto` method leaves the circle basis for a mapped one.
 _NOISE_GAIN_WARNING = AUTO_MAX_NOISE_GAIN
+
+
+MODES_ARGUMENT = bounded_int(MAX_MODES, "Noll 1000 reaches radial order 44")
+MESH_VERTICES_ARGUMENT = bounded_int(MAX_TARGET_VERTICES, "a mesh finer than the pixels adds nothing")
 
 
 def _pupil_argument(text: str) -> Pupil:
@@ -43,6 +48,8 @@ def _pupil_argument(text: str) -> Pupil:
         raise argparse.ArgumentTypeError(
             f"expected CX,CY,R in pixels (three numbers), got {text!r}"
         ) from None
+    if not (np.isfinite([cx, cy, r]).all() and r > 0):
+        raise argparse.ArgumentTypeError(f"expected finite CX,CY and R > 0 in pixels, got {text!r}")
     return Pupil(cx, cy, r)
 
 
@@ -56,7 +63,7 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--mask", help="mask (.npy or image, non-zero = valid); default: finite pixels")
     add_fit_method_argument(parser, "--method", available_methods())
-    parser.add_argument("--modes", type=positive_int, default=36, help="number of modes (36)")
+    parser.add_argument("--modes", type=MODES_ARGUMENT, default=36, help=f"number of modes (36; at most {MAX_MODES})")
     parser.add_argument("--ordering", choices=("noll", "ansi", "fringe"), default="noll")
     parser.add_argument(
         "--pupil", type=_pupil_argument, help="unit disk CX,CY,R in pixels (CX column, CY row)"
@@ -67,8 +74,8 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
         help="interior weights of the csf-qcm map (graph: the paper's)",
     )
     parser.add_argument(
-        "--mesh-vertices", type=positive_int, default=15000,
-        help="approximate mesh size of the mapped methods (15000)",
+        "--mesh-vertices", type=MESH_VERTICES_ARGUMENT, default=15000,
+        help=f"approximate mesh size of the mapped methods (15000; at most {MAX_TARGET_VERTICES})",
     )
     parser.add_argument(
         "--no-angular-balance", action="store_true",
@@ -96,7 +103,8 @@ def _load_inputs(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str,
 def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack fit``; returns the exit status."""
     if args.example and args.mask:
-        parser.error("--mask cannot be combined with --example")
+        raise InputError("--mask cannot be combined with --example; expected one of them")
+    save_to = check_output_file(args.save_fit, "--save-fit") if args.save_fit else None
     wavefront, mask, source, truth = _load_inputs(args)
     try:
         fitter = build_fitter(
@@ -116,16 +124,17 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     started = time.perf_counter()
     result = fitter.fit(wavefront, residual=True)
     fit_seconds = time.perf_counter() - started
+    require_finite(source, "fit", [*result.coefficients, result.residual_rms, result.residual_pv])
     fitted = fitter.surface(result.coefficients)
-    if args.save_fit:
-        np.save(args.save_fit, fitted)
+    if save_to is not None:
+        save_npy(save_to, fitted)
     truth_error = None
     if truth is not None:
         truth_view = truth if args.remove is None else truth - (wavefront - result.residual_map - fitted)
         truth_error = float(np.sqrt(np.nanmean((fitted - truth_view) ** 2)))
     report = fit_report(source, fitter, result, fit_seconds, truth_error)
     if args.json:
-        print(json.dumps(report))
+        print(json_text(report))
     else:
         print(format_report(report))
     return 0
@@ -215,4 +224,5 @@ COMMAND = Command(
     help="fit Zernike terms to a wavefront map (.npy, .dat, .datx, 4D .h5)",
     description="Fit Zernike terms to a 2-D wavefront map (.npy, NaN outside the aperture) or a measured map.",
     add_arguments=add_fit_arguments, handler=run_fit,
+    subject=lambda args: "the bundled example" if args.example else str(args.wavefront),
 )

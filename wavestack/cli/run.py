@@ -8,7 +8,6 @@ cleanly: the recording is flushed and closed, the devices released, the summary 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import threading
 import time
@@ -20,6 +19,7 @@ import numpy as np
 
 from wavestack.cli.arguments import positive_float, positive_int
 from wavestack.cli.command import Command
+from wavestack.cli.outputs import check_output_file, json_text
 from wavestack.cli.signals import stop_on_signals
 from wavestack.config import load_station_config
 from wavestack.recording import StationRecorder, open_recording
@@ -79,7 +79,7 @@ class JsonLines:
         self._stream = stream
 
     def __call__(self, record: CycleRecord) -> None:
-        self._stream.write(json.dumps(record.result.to_json()) + "\n")
+        self._stream.write(json_text(record.result.to_json()) + "\n")
         self._stream.flush()
 
 
@@ -96,6 +96,8 @@ def _summary_lines(summary: StationSummary) -> list[str]:
 
 def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Run the station until the limit, Ctrl-C or SIGTERM; returns the exit status."""
+    # every path first: a typo in --record must not cost opening (and homing) every device
+    record_to = check_output_file(args.record, "--record") if args.record else None
     config = load_station_config(args.config)
     stop = threading.Event()
     out = sys.stdout
@@ -104,10 +106,10 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         station = Station(config, devices)
         stack.callback(station.close)
         sinks: list[ResultSink] = []
-        if args.record:
+        if record_to is not None:
             camera = devices.camera
             dtype = np.uint8 if camera.pixel_format == "Mono8" else np.uint16
-            recorder = StationRecorder(open_recording(args.record, config, (camera.height, camera.width), dtype),
+            recorder = StationRecorder(open_recording(str(record_to), config, (camera.height, camera.width), dtype),
                                        config)
             stack.callback(recorder.close)
             sinks.append(recorder)
@@ -120,7 +122,7 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
 
         summary = station.run(stop=stop, on_result=on_result, max_results=args.frames, duration_s=args.duration)
     if args.json:
-        out.write(json.dumps(summary.to_json()) + "\n")
+        out.write(json_text(summary.to_json()) + "\n")
     else:
         if isinstance(view, TerminalView):
             view.draw()
@@ -135,4 +137,5 @@ COMMAND = Command(
     description="Run a metrology station: frames -> aperture -> unwrap -> Zernike fit -> results, "
                 "live view or JSON lines, optional recording, removal commands to the polishing PLC.",
     add_arguments=add_run_arguments, handler=run_station,
+    subject=lambda args: str(args.config) if args.config else "the simulated station (default configuration)",
 )

@@ -61,4 +61,5 @@ COMMAND = Command(
     help="run a simulated instrument standalone (pzt, plc)",
     description="Run one simulated instrument on its real transport until Ctrl-C or SIGTERM.",
     add_arguments=add_sim_arguments, handler=run_sim,
+    subject=lambda args: str(args.config) if args.config else f"sim {args.device}",
 )
