@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from wavestack.cli.command import Command
+from wavestack.cli.outputs import json_text
 from wavestack.recording import RecordingReader
 from wavestack.recording.replay import ReplayedResult, SkippedSet, recorded_config, replay
 from wavestack.config import load_station_config
@@ -33,14 +33,14 @@ def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
         config = load_station_config(args.config) if args.config else recorded_config(reader, args.recording)
         for item in replay(reader, config, same_settings=args.config is None):
             if args.json:
-                out.write(json.dumps(item.to_json()) + "\n")
+                out.write(json_text(item.to_json()) + "\n")
             else:
                 out.write(_line(item) + "\n")
             tally.add(item)
         damage, notes = [str(d) for d in reader.damage], list(reader.notes)
     summary = tally.summary() | {"damage": damage, "notes": notes}
     if args.json:
-        out.write(json.dumps(summary) + "\n")
+        out.write(json_text(summary) + "\n")
     else:
         out.write(tally.text() + "\n")
     out.flush()

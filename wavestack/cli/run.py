@@ -19,10 +19,10 @@ import numpy as np
 
 from wavestack.cli.arguments import positive_float, positive_int
 from wavestack.cli.command import Command
-from wavestack.cli.outputs import check_output_file, json_text
+from wavestack.cli.outputs import json_text
 from wavestack.cli.signals import stop_on_signals
 from wavestack.config import load_station_config
-from wavestack.recording import StationRecorder, open_recording
+from wavestack.recording import StationRecorder, check_recording_path, open_recording
 from wavestack.station import (
     CycleRecord,
     LiveStats,
@@ -97,7 +97,7 @@ def _summary_lines(summary: StationSummary) -> list[str]:
 def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Run the station until the limit, Ctrl-C or SIGTERM; returns the exit status."""
     # every path first: a typo in --record must not cost opening (and homing) every device
-    record_to = check_output_file(args.record, "--record") if args.record else None
+    record_to = check_recording_path(args.record) if args.record else None  # never over a recording
     config = load_station_config(args.config)
     stop = threading.Event()
     out = sys.stdout
