@@ -86,7 +86,7 @@ class LinkTiming:
 
     io_timeout_s: float = 0.5
     reconnect_initial_s: float = 0.05
-    reconnect_max_s: float = 2.0
+    reconnect_max_s: float = 0.5
     command_retries: int = 2
     heartbeat_echo_max_lag: int = 2
 

@@ -115,6 +115,8 @@ REFUSED = [
     # the PLC's watchdog outlives one retried command
     ("plc", {"io_timeout_s": "1.0"},
      r"\[plc\] io_timeout_s \(1\) x \(1 \+ command_retries 2\) = 3 s: expected less than watchdog_timeout_s \(2\)"),
+    # after a short PLC outage the host's back-off alone must not outlast the watchdog
+    ("plc", {"reconnect_max_s": "2.0"}, r"\[plc\] reconnect_max_s = 2: expected at most a quarter of watchdog_timeout_s"),
 ]
 
 

@@ -63,7 +63,8 @@ class PlcLinkSettings:
     watchdog_timeout_s: float = setting(2.0, minimum=0.01, maximum=600.0, doc="PLC watchdog timeout")
     io_timeout_s: float = setting(0.5, minimum=0.001, maximum=60.0, doc="longest wait for one reply")
     reconnect_initial_s: float = setting(0.05, minimum=0.001, maximum=60.0, doc="first reconnect back-off")
-    reconnect_max_s: float = setting(2.0, minimum=0.001, maximum=600.0, doc="longest reconnect back-off")
+    reconnect_max_s: float = setting(0.5, minimum=0.001, maximum=600.0,
+                                     doc="longest reconnect back-off; at most a quarter of watchdog_timeout_s")
     command_retries: int = setting(2, minimum=0, maximum=10, doc="resends of a command after a lost reply")
     heartbeat_echo_max_lag: int = setting(2, minimum=0, maximum=1000, doc="beats the echo may trail")
 
@@ -229,6 +230,11 @@ def _check_consistency(config: PlcConfig) -> None:
     if link.reconnect_initial_s > link.reconnect_max_s:
         raise ConfigError(f"{where} reconnect_initial_s ({link.reconnect_initial_s}) must not exceed "
                           f"reconnect_max_s ({link.reconnect_max_s})")
+    if link.reconnect_max_s > link.watchdog_timeout_s / 4:
+        # a PLC back from a short outage must get a heartbeat before its watchdog runs out
+        raise ConfigError(f"{where} reconnect_max_s = {link.reconnect_max_s:g}: expected at most a quarter of "
+                          f"watchdog_timeout_s ({link.watchdog_timeout_s:g} s), or after a short PLC outage the "
+                          "host's back-off alone outlasts the watchdog")
     problem = _self_check_problem(link.self_check_value)
     if problem is not None:
         raise ConfigError(f"{where} self_check_value = {link.self_check_value!r}: {problem}")
