@@ -96,6 +96,7 @@ class PolishingLink:
         self._beat = 0
         self._heartbeat_pending = True
         self._echo_stale = False
+        self._echo_at_last_command: int | None = None  # the echo the gate saw before the last command
         self._self_check_passed = False
         self._sent_commands: dict[int, tuple[int, ...]] = {}
         self._limits = command_limits
@@ -363,9 +364,16 @@ class PolishingLink:
         if stale is not None:
             self._echo_stale = True
             raise PlcNotReady(self._device, f"refusing command {command_id}: {stale.detail}")
+        if status.heartbeat_echo == self._echo_at_last_command and status.heartbeat_echo != self._beat:
+            # Within the lag tolerance, yet no scan since the last command: a program that just
+            # stopped looks like this for max_lag beats, and gets no command in them.
+            raise PlcNotReady(self._device, f"refusing command {command_id}: the heartbeat echo has stayed at "
+                              f"{status.heartbeat_echo} since the last command while the host sent {self._beat}; "
+                              "expected the echo to advance (a PLC scan) between commands")
         why = not_ready(status)
         if why is not None:
             raise PlcNotReady(self._device, f"refusing command {command_id}: the PLC is {why}")
+        self._echo_at_last_command = status.heartbeat_echo
         return self._settle(status, deadline)
 
     def _settle(self, status: PlcStatus, deadline: float) -> np.ndarray:

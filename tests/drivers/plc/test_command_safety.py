@@ -144,6 +144,24 @@ def test_no_command_while_the_heartbeat_echo_is_frozen() -> None:
         assert len(_commands(sim)) == 1
 
 
+def test_no_command_in_the_echo_lag_window_after_the_program_stops() -> None:
+    # the echo may trail by max_lag beats, but a command needs a scan since the previous command
+    with plc() as (sim, link):
+        ready(link)
+        link.restrict(LIMITS)
+        link.heartbeat(timeout_s=1.0)
+        _send(link, 1.0)
+        sim.faults.freeze_heartbeat_echo = True
+        link.heartbeat(timeout_s=1.0)  # one beat behind: within the lag tolerance, no error yet
+        with pytest.raises(PlcNotReady, match="expected the echo to advance"):
+            _send(link, 2.0)
+        assert len(_commands(sim)) == 1
+        sim.faults.freeze_heartbeat_echo = False
+        link.heartbeat(timeout_s=1.0)
+        _send(link, 2.0)
+        assert len(_commands(sim)) == 2
+
+
 def test_the_held_command_is_read_back_after_a_trip_and_after_another_clients_command() -> None:
     with plc(watchdog_timeout_s=0.5) as (sim, link):
         ready(link)
