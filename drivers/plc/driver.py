@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike
 from wavestack.drivers.errors import DeviceTimeout, ProtocolError
 from wavestack.drivers.plc.commands import CommandLedger, CommandLimits, CommandRefused
 from wavestack.drivers.plc.gate import (HeartbeatEchoStale, PlcNotReady, command_refusal, decode_self_check,
-                                       echo_lag_error, not_ready)
+                                       echo_lag_error, no_scan_since, not_ready)
 from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused, registers_fit
 from wavestack.drivers.plc.status import (
     CommandAck,
@@ -364,13 +364,7 @@ class PolishingLink:
         if stale is not None:
             self._echo_stale = True
             raise PlcNotReady(self._device, f"refusing command {command_id}: {stale.detail}")
-        if status.heartbeat_echo == self._echo_at_last_command and status.heartbeat_echo != self._beat:
-            # Within the lag tolerance, yet no scan since the last command: a program that just
-            # stopped looks like this for max_lag beats, and gets no command in them.
-            raise PlcNotReady(self._device, f"refusing command {command_id}: the heartbeat echo has stayed at "
-                              f"{status.heartbeat_echo} since the last command while the host sent {self._beat}; "
-                              "expected the echo to advance (a PLC scan) between commands")
-        why = not_ready(status)
+        why = no_scan_since(self._echo_at_last_command, self._beat, status) or not_ready(status)
         if why is not None:
             raise PlcNotReady(self._device, f"refusing command {command_id}: the PLC is {why}")
         self._echo_at_last_command = status.heartbeat_echo

@@ -16,7 +16,8 @@ from wavestack.drivers.plc.codec import WORD_ORDERS, decode_float32, round_to_fl
 from wavestack.drivers.plc.register_map import RegisterBlock
 from wavestack.drivers.plc.status import PlcStatus
 
-__all__ = ["HeartbeatEchoStale", "PlcNotReady", "command_refusal", "decode_self_check", "echo_lag_error", "not_ready"]
+__all__ = ["HeartbeatEchoStale", "PlcNotReady", "command_refusal", "decode_self_check", "echo_lag_error", "no_scan_since",
+           "not_ready"]
 
 
 class HeartbeatEchoStale(ProtocolError):
@@ -42,6 +43,27 @@ def command_refusal(device: str, *, monitor: bool, self_check_passed: bool, echo
         return PlcNotReady(device, "refusing to send a command: the last heartbeat showed a stale echo (the PLC "
                            "program is not scanning)")
     return None
+
+
+def no_scan_since(echo_at_last_command: int | None, beat: int, status: PlcStatus) -> str | None:
+    """Why no PLC scan is seen since the last command, or None (pure).
+
+    The echo may trail the heartbeat by a few beats (a slow scan), so a program that has just
+    stopped is not told from a slow one for that many beats; a command therefore also needs the
+    echo to have moved since the gate passed the previous command (or to equal the last beat).
+
+    Examples
+    --------
+    >>> from wavestack.drivers.plc.status import decode_status
+    >>> status = decode_status([1, 7, 41])   # ready, last accepted id 7, echo 41
+    >>> no_scan_since(41, 42, status) is not None, no_scan_since(40, 42, status), no_scan_since(41, 41, status)
+    (True, None, None)
+    """
+    echo = status.heartbeat_echo
+    if echo_at_last_command is None or echo != echo_at_last_command or echo == beat:
+        return None
+    return (f"not seen scanning since the last command: the heartbeat echo has stayed at {echo} while the host "
+            f"sent {beat}; expected the echo to advance (a PLC scan) between commands")
 
 
 def not_ready(status: PlcStatus) -> str | None:
