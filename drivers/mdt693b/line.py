@@ -16,6 +16,7 @@ from contextlib import contextmanager
 
 import serial
 
+from wavestack.drivers.device_path import check_device_path
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, ProtocolError
 from wavestack.drivers.mdt693b.command_sets import A_COMMANDS, B_COMMANDS, CommandSet
 from wavestack.drivers.mdt693b.protocol import PROMPTS, Reply, encode_command, parse_number, split_reply
@@ -70,10 +71,15 @@ class ControllerLine:
         Raises
         ------
         ValueError
-            The URL's scheme is unknown to pyserial.
+            The URL's scheme is unknown to pyserial, or a local path that is not a serial port or
+            terminal once resolved (checked again here, just before opening: a symlink may have
+            changed since the configuration was read; see :mod:`wavestack.drivers.device_path`).
         DeviceDisconnected
             The port cannot be opened.
         """
+        refusal = check_device_path(self.url) if "://" not in self.url else None
+        if refusal is not None:
+            raise ValueError(f"{self._name()}: refusing to open {self.url!r}: {refusal}")
         try:
             port = serial.serial_for_url(self.url, baudrate=115200, bytesize=8, parity="N", stopbits=1,
                                          timeout=_POLL_S, write_timeout=write_timeout_s)

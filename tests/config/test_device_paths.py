@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from wavestack.config.device_path import check_device_path
+from wavestack.drivers.device_path import check_device_path
 from wavestack.config.pzt import parse_pzt_config
 from wavestack.config.schema import ConfigError
 
@@ -108,3 +108,4 @@ def test_a_real_dev_symlink_to_a_pseudo_terminal_is_allowed(shm_link: Path) -> N
     finally:
         os.close(controller)
         os.close(terminal)
+

@@ -9,7 +9,7 @@ this module is the simulated station ``wavestack run`` uses without ``--config``
 from __future__ import annotations
 
 from wavestack.config._checks import BIT_DEPTH
-from wavestack.config.device_path import DEVICE_PATH_RULE, check_device_path
+from wavestack.drivers.device_path import DEVICE_PATH_RULE, check_device_path
 from wavestack.config.camera import CameraSettings, CameraSimulatorSettings, parse_camera_config
 from wavestack.config.plc import (
     PlcConfig,

@@ -22,7 +22,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, TypeVar
 
-from wavestack.config.device_path import check_device_path, is_device_path
+from wavestack.drivers.device_path import check_device_path, is_device_path
 from wavestack.pipeline import InputError
 
 T = TypeVar("T")

@@ -1,4 +1,4 @@
-"""Which local device paths a configuration may name: serial ports and terminals under ``/dev``, nothing else.
+"""Which local device paths a driver may open: serial ports and terminals under ``/dev``, nothing else.
 
 A device URL of kind ``device`` is opened read-write by the serial driver, so a path that only
 *looks* like a device (``/dev/../home/user/file``, or a symlink under ``/dev`` pointing at a
@@ -21,9 +21,10 @@ Allowed device paths
 Refused: ``/dev/tty`` itself (the controlling terminal), any other ``/dev`` node (disks,
 ``/dev/null``, ``/dev/shm/...``), and any path that resolves outside ``/dev``.
 
-The configuration keeps the path as written (a by-id name survives a replug that renames
-``ttyUSB0``); a driver that opens it later should call :func:`check_device_path` again just
-before opening, since a symlink may change in between.
+The configuration checks the path when it is loaded and keeps it as written (a by-id name
+survives a replug that renames ``ttyUSB0``); the MDT693B driver checks it again just before it
+opens the port, since a symlink may change in between, and code that builds a driver without a
+configuration gets the same check.
 """
 
 from __future__ import annotations
