@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from wavestack.pipeline import InputError
+from wavestack.station import json_ready
 
 __all__ = ["check_output_file", "json_text", "require_finite", "save_npy"]
 
@@ -81,17 +82,7 @@ def json_text(report: Any) -> str:
     may still be infinite is a diagnostic (a condition number), which ``null`` marks as "not a
     number" as the JSON standard (RFC 8259, section 6) allows no other way.
     """
-    return json.dumps(_finite(report), allow_nan=False)
-
-
-def _finite(value: Any) -> Any:
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {key: _finite(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(item) for item in value]
-    return value
+    return json.dumps(json_ready(report), allow_nan=False)
 
 
 def require_finite(source: str, what: str, values: ArrayLike) -> None:
