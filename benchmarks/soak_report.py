@@ -17,12 +17,16 @@ from soak_faults import FAULT_KINDS
 from soak_observe import Window
 
 __all__ = ["GrowthSite", "RssVerdict", "Sample", "fault_problems", "growth_sites", "render_text", "rss_verdict",
+           "unsafe_commands",
            "verdict_json"]
 
 _KINDS = {kind.name: kind for kind in FAULT_KINDS}
-# faults during which no command may reach the PLC (issue 13: commands while the PLC is not scanning)
-_NO_COMMANDS_WHILE = {"plc_freeze_echo": "the heartbeat echo was frozen (PLC not scanning)",
-                      "plc_estop": "the e-stop was pressed"}
+# faults during which no command may reach the PLC (issue 13: commands while the PLC is not scanning), and
+# how many may: the echo had advanced since the previous command when the echo froze, so the link may
+# send one more command before it can see that the PLC stopped scanning (and the result of a command
+# sent just before the fault is counted in its window); a second one had no scan before it
+_NO_COMMANDS_WHILE = {"plc_freeze_echo": ("the heartbeat echo was frozen (PLC not scanning)", 1),
+                      "plc_estop": ("the e-stop was pressed", 0)}
 RECOVERY_GRACE_S = 5.0  # a fault followed this soon by the next one is not judged on its recovery
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -127,6 +131,13 @@ def growth_sites(before: tracemalloc.Snapshot, after: tracemalloc.Snapshot, span
     return sites
 
 
+def unsafe_commands(window: Window) -> int:
+    """Commands sent during a fault that forbids them, beyond those the link may send before it can see it."""
+    if window.kind not in _NO_COMMANDS_WHILE:
+        return 0
+    return max(0, window.counts.get("sent_while_active", 0) - _NO_COMMANDS_WHILE[window.kind][1])
+
+
 def fault_problems(window: Window) -> list[str]:
     """What went wrong with one fault (empty: injected, seen in the counters/results, recovered)."""
     if window.skipped:
@@ -140,9 +151,11 @@ def fault_problems(window: Window) -> list[str]:
         problems.append("never fired")
     elif kind is not None and kind.expects and not any(signals.get(name) for name in kind.expects):
         problems.append("UNACCOUNTED (expected " + " or ".join(kind.expects) + ")")
-    unsafe = window.counts.get("sent_while_active", 0)
-    if unsafe and window.kind in _NO_COMMANDS_WHILE:
-        problems.append(f"UNSAFE: {unsafe} commands sent while {_NO_COMMANDS_WHILE[window.kind]}")
+    unsafe = unsafe_commands(window)
+    if unsafe:
+        what, allowed = _NO_COMMANDS_WHILE[window.kind]
+        problems.append(f"UNSAFE: {unsafe} commands sent while {what}" + (f" (beyond the {allowed} the link may send "
+                                                                            "before it can see it)" if allowed else ""))
     if window.trips_failure > 0:
         problems.append(f"WATCHDOG TRIPPED x{window.trips_failure} (FAILURE: no PLC outage explains it)")
     observed_s = (window.end_t_s or 0.0) - (window.clear_t_s or 0.0)
@@ -190,7 +203,7 @@ def verdict_json(run: dict[str, Any], samples: list[Sample], rss: RssVerdict, wi
     faults = [w for w in windows if w.index >= 0]
     unaccounted = [w.index for w in faults if any(p.startswith("UNACCOUNTED") for p in fault_problems(w))]
     exceptions = len(failures["thread_exceptions"]) + len(failures["station_crashes"])
-    unsafe = sum(w.counts.get("sent_while_active", 0) for w in faults if w.kind in _NO_COMMANDS_WHILE)
+    unsafe = sum(unsafe_commands(w) for w in faults)
     station_failures = sum(len(failures[k]) for k in ("trip_failures", "stuck", "counters_backwards"))
     station_failures += len(failures["injection_errors"])
     station_failures += sum(1 for w in faults if any(p.startswith(("no valid", "outputs silent", "UNSAFE"))
