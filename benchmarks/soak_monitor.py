@@ -25,7 +25,7 @@ from typing import Any
 from soak_observe import Observer, Window
 from soak_operator import Operator
 from soak_report import Sample
-from soak_trips import FAILSAFE, TripLimits, classify_trip
+from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip
 
 __all__ = ["Monitor", "rss_mb"]
 
@@ -108,7 +108,7 @@ class Monitor:
                                                          "first command")
             return
         if self._limits is None:
-            verdict, cause = "FAILURE", window
+            verdict, cause = FAILURE, window
         else:
             verdict, cause = classify_trip(t, list(self._observer.windows), self._limits)
         if verdict == FAILSAFE:

@@ -17,8 +17,7 @@ from soak_faults import FAULT_KINDS
 from soak_observe import Window
 
 __all__ = ["GrowthSite", "RssVerdict", "Sample", "fault_problems", "growth_sites", "render_text", "rss_verdict",
-           "unsafe_commands",
-           "verdict_json"]
+           "unsafe_commands", "verdict_json"]
 
 _KINDS = {kind.name: kind for kind in FAULT_KINDS}
 # faults during which no command may reach the PLC (issue 13: commands while the PLC is not scanning), and
