@@ -12,17 +12,23 @@ split replies, unplug, PLC reply faults, delay, restart, frozen heartbeat echo, 
 ``--list-faults``). A monitor thread samples VmRSS (``/proc/self/status``) and the counters every
 ``--sample-every-s``.
 
-What escapes the station (an exception out of ``Station.run``) is recorded with the fault before
-it, and a fresh station is built on fresh simulators so the run goes on; so is a stuck station (no
-valid result, or the PLC watchdog tripped, for ``--stuck-s`` while no fault is active), unless
-``--on-failure continue`` (a stuck station is only reported, a crash ends the run) or ``stop``. Exceptions in any thread are caught by
-``threading.excepthook``. Ctrl-C or SIGTERM ends the run early, with the report.
+A PLC watchdog trip is the designed fail-safe when a PLC fault kept the PLC out for longer than
+the watchdog allows (``soak_trips``), a FAILURE otherwise; either way the soak acts as the operator:
+``--operator-rearm-s`` after the trip (0: never) it re-arms the watchdog through a monitor link, as
+``wavestack plc rearm`` does, and the same station goes on. What escapes the station (an exception
+out of ``Station.run``) is recorded with the fault before it, and a fresh station is built on fresh
+simulators so the run goes on; so is a stuck station (no valid result for ``--stuck-s`` while no
+fault is active), unless ``--on-failure continue`` (a stuck station is only reported, a crash ends
+the run) or ``stop``. Exceptions in any thread are caught by ``threading.excepthook``. Ctrl-C or
+SIGTERM ends the run early, with the report.
 
 Printed: a table over time (RSS, results, frame counters, faults so far), one row per fault
 (its parameters, the signals it left in the results and counters, the time to the next valid
 result, its problems), the faults by kind, every failure, and the verdict: RSS slope after the
-warm-up (least squares, MB/min) and its largest deviation from the post-warm-up mean (target
-+-5 %), faults unaccounted for, unhandled exceptions, results per second. ``--tracemalloc`` adds
+warm-up (least squares, MB/min; over the last station's life only, a rebuilt station's heap being
+new) and its largest deviation from the post-warm-up mean (target +-5 %), faults unaccounted for,
+watchdog trips (fail-safe / FAILURE), operator re-arms and the commands the PLC accepted after them,
+station rebuilds, commands sent while the PLC was not scanning (UNSAFE), unhandled exceptions, results per second. ``--tracemalloc`` adds
 the allocation sites that grew from the end of the warm-up to the end, the station still running
 (file:line, KiB, KiB/min, bytes per result); tracing slows the station and adds its own memory, so read RSS from a run without it. ``--json``
 prints one JSON object instead. Exit status 0 when every target is met, 1 otherwise.
@@ -50,16 +56,19 @@ from typing import Any
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from soak_faults import FAULT_KINDS, Injection, ScheduledFault, Targets, make_schedule, select_kinds  # noqa: E402
+from soak_faults import (EXTRA_KINDS, FAULT_KINDS, Injection, ScheduledFault, Targets,  # noqa: E402
+                         make_schedule, select_kinds)
 from soak_observe import Observer, Window, device_snapshot  # noqa: E402
 from soak_monitor import Monitor  # noqa: E402
+from soak_operator import Operator  # noqa: E402
+from soak_trips import TripLimits  # noqa: E402
 from soak_report import growth_sites, render_text, rss_verdict, verdict_json  # noqa: E402
 
 from wavestack.config import StationConfig, load_station_config  # noqa: E402
 from wavestack.station import Station, StationSummary, counter_lines, open_station_devices  # noqa: E402
 
-FAILURE_KINDS = ("station_crashes", "thread_exceptions", "stuck", "watchdog_trips", "startup_watchdog_trips",
-                 "counters_backwards", "injection_errors")
+FAILURE_KINDS = ("station_crashes", "thread_exceptions", "stuck", "trip_failures", "failsafe_trips",
+                 "operator_rearms", "rearm_errors", "startup_watchdog_trips", "counters_backwards", "injection_errors")
 
 
 @dataclass
@@ -208,6 +217,7 @@ class FaultScheduler:
             return
         injection = fault.kind.inject(_targets(devices), random.Random(fault.seed))
         window.params, window.clear_t_s = injection.params, window.t_s + injection.duration_s
+        window.plc_down_s, window.plc_reply_delay_s = injection.plc_down_s, injection.plc_reply_delay_s
         self._observer.open_window(window, device_snapshot(devices), incarnation)
         self.injected += 1
         self._last = (window, injection)
@@ -262,6 +272,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--sample-every-s", type=float, default=5.0)
     p.add_argument("--table-every-s", type=float, default=30.0, help="rows of the printed table")
     p.add_argument("--stuck-s", type=float, default=30.0, help="no valid result / tripped watchdog this long: stuck")
+    p.add_argument("--operator-rearm-s", type=float, default=3.0,
+                   help="re-arm a tripped PLC watchdog this long after the trip, as `wavestack plc rearm` "
+                        "(default 3; 0: never)")
     p.add_argument("--startup-s", type=float, default=120.0, help="no first result this long after a start: stuck")
     p.add_argument("--on-failure", choices=("restart", "continue", "stop"), default="restart",
                    help="after a crash or a stuck station: build a fresh one (default), or not (a stuck one "
@@ -288,6 +301,10 @@ def _run_threads(args: argparse.Namespace, runner: StationRunner, scheduler: Fau
     scheduler.finish()
     threads[1].join()
     observer.close(device_snapshot(runner.devices), runner.incarnation)
+    if monitor.operator is not None:  # the station still runs: its PLC's accepted commands after each re-arm
+        devices = runner.devices
+        monitor.accepted_after_rearms = monitor.operator.accepted_after(
+            devices.plc_simulator if devices is not None else None, runner.incarnation)
     monitor.stop.set()
     threads[2].join()
     monitor.sample(observer.now())
@@ -302,7 +319,7 @@ def _run_threads(args: argparse.Namespace, runner: StationRunner, scheduler: Fau
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     if args.list_faults:
-        for kind in FAULT_KINDS:
+        for kind in FAULT_KINDS + EXTRA_KINDS:
             print(f"{kind.name:24s} {kind.device:7s} {kind.what}; expects {' or '.join(kind.expects) or 'nothing'}")
         return 0
     config = load_station_config(args.config)
@@ -330,13 +347,25 @@ def main(argv: list[str] | None = None) -> int:
     runner = StationRunner(config, observer, failures, restart_on_failure=args.on_failure == "restart")
     scheduler = FaultScheduler(schedule, runner, observer, failures)
     scheduler.verbose = not args.json
-    monitor = Monitor(args, runner, observer, failures, scheduler)
+    plc = config.plc.link if config.plc is not None and config.outputs.enabled else None
+    operator = Operator(plc, args.operator_rearm_s) if plc is not None and args.operator_rearm_s > 0 else None
+    monitor = Monitor(args, runner, observer, failures, scheduler, operator,
+                      TripLimits.from_link(plc) if plc is not None else None)
     for signum in (signal.SIGINT, signal.SIGTERM):  # end early, still with the report
         signal.signal(signum, lambda *_: runner.stop.set())
     _run_threads(args, runner, scheduler, monitor, observer)
     failures.entries["counters_backwards"] = list(observer.backwards)
     return _report(args, config, schedule, kinds, observer, runner, monitor, failures, log_counter, started,
                    scheduler.first_result_t_s, load_at_start)
+
+
+def _rearms(monitor: Monitor) -> list[dict[str, Any]]:
+    """Each operator re-arm, with the commands the PLC accepted after it (None: not known, -1: another station)."""
+    if monitor.operator is None:
+        return []
+    after = monitor.accepted_after_rearms
+    return [{"t_s": round(r.t_s, 1), "tripped_for_s": round(r.tripped_for_s, 1), "status": r.status,
+             "accepted_after": after[k] if k < len(after) else None} for k, r in enumerate(monitor.operator.rearms)]
 
 
 def _report(args: argparse.Namespace, config: StationConfig, schedule: list[ScheduledFault], kinds: tuple,
@@ -361,7 +390,8 @@ def _report(args: argparse.Namespace, config: StationConfig, schedule: list[Sche
            "results_per_s": observer.results / elapsed if elapsed else 0.0,
            "station_runs": len(runner.summaries) + runner.crashes, "crashes": runner.crashes,
            "restarts": runner.restarts, "tracemalloc": args.tracemalloc,
-           "first_result_t_s": first_result_t_s,
+           "first_result_t_s": first_result_t_s, "operator_rearm_s": args.operator_rearm_s,
+           "rearms": _rearms(monitor),
            "log_counts": dict(log_counter.counts.most_common(12))}
     rss = rss_verdict(monitor.samples, args.warmup_s)
     report = verdict_json(run, monitor.samples, rss, observer.windows, failures.entries, sites)

@@ -13,12 +13,13 @@ station's results and counters; a fault with no such signal in its window is *un
 
 from __future__ import annotations
 
+import dataclasses
 import random
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["FAULT_KINDS", "FaultKind", "Injection", "ScheduledFault", "Targets", "make_schedule", "select_kinds"]
+__all__ = ["EXTRA_KINDS", "FAULT_KINDS", "FaultKind", "Injection", "ScheduledFault", "Targets", "make_schedule", "select_kinds"]
 
 
 @dataclass(frozen=True)
@@ -43,12 +44,18 @@ class Injection:
         For a one-shot switch: True once the simulator used it (None: a state switch, always on).
     leftover : callable or None
         Switches a one-shot off if it never fired (before the next fault).
+    plc_down_s : float
+        How long the PLC's Modbus server is down (s; 0: not a restart).
+    plc_reply_delay_s : float
+        How late each PLC reply comes while the fault is on (s; 0: not a delay).
     """
 
     params: str
     steps: list[tuple[float, Callable[[], None]]]
     fired: Callable[[], bool] | None = None
     leftover: Callable[[], None] | None = None
+    plc_down_s: float = 0.0
+    plc_reply_delay_s: float = 0.0
 
     @property
     def duration_s(self) -> float:
@@ -133,13 +140,17 @@ def _plc_replies(method: str) -> Callable[[Targets, random.Random], Injection]:
 def _plc_delay(t: Targets, rng: random.Random) -> Injection:
     delay, seconds = rng.uniform(0.2, 1.5), rng.uniform(1.0, 4.0)
     faults = t.plc.faults
-    return _hold(_setter(faults, "delay_s", delay), _setter(faults, "delay_s", 0.0), seconds,
+    held = _hold(_setter(faults, "delay_s", delay), _setter(faults, "delay_s", 0.0), seconds,
                  f"{delay:.2f} s for {seconds:.2f} s")
+    return dataclasses.replace(held, plc_reply_delay_s=delay)
 
 
-def _plc_restart(t: Targets, rng: random.Random) -> Injection:
-    downtime = rng.uniform(0.2, 3.0)
-    return Injection(f"down {downtime:.2f} s", [(0.0, lambda: t.plc.restart(downtime)), (downtime, _noop)])
+def _plc_restart_between(low: float, high: float) -> Callable[[Targets, random.Random], Injection]:
+    def inject(t: Targets, rng: random.Random) -> Injection:
+        downtime = rng.uniform(low, high)
+        return Injection(f"down {downtime:.2f} s", [(0.0, lambda: t.plc.restart(downtime)), (downtime, _noop)],
+                         plc_down_s=downtime)
+    return inject
 
 
 def _plc_switch(name: str, low: float, high: float) -> Callable[[Targets, random.Random], Injection]:
@@ -186,11 +197,16 @@ FAULT_KINDS: tuple[FaultKind, ...] = (
               "next 1-3 replies with function code 0x7F"),
     FaultKind("plc_delay", "plc", _plc_delay, (), "every reply 0.2-1.5 s late for 1-4 s (benign below the "
               "link's I/O timeout)"),
-    FaultKind("plc_restart", "plc", _plc_restart, _PLC_SIGNALS, "Modbus server restart, down 0.2-3 s"),
+    FaultKind("plc_restart", "plc", _plc_restart_between(0.2, 3.0), _PLC_SIGNALS, "Modbus server restart, down 0.2-3 s"),
     FaultKind("plc_freeze_echo", "plc", _plc_switch("freeze_heartbeat_echo", 1.0, 4.0), ("heartbeat_errors",),
               "heartbeat echo frozen for 1-4 s (PLC not scanning)"),
     FaultKind("plc_estop", "plc", _plc_switch("estop", 1.0, 4.0), ("estop_seen", "plc_not_sent"),
               "e-stop pressed for 1-4 s"),
+)
+# chosen by name only (never in the default mix, so a seed's schedule stays what it was)
+EXTRA_KINDS: tuple[FaultKind, ...] = (
+    FaultKind("plc_outage", "plc", _plc_restart_between(2.6, 3.0), _PLC_SIGNALS,
+              "Modbus server restart, down 2.6-3 s (longer than the watchdog: a fail-safe trip)"),
 )
 
 
@@ -205,12 +221,13 @@ def select_kinds(spec: str | None, targets_present: set[str] | None = None) -> t
     kinds = FAULT_KINDS
     if spec:
         wanted = [part.strip() for part in spec.split(",") if part.strip()]
-        known = {k.name for k in FAULT_KINDS} | {k.device for k in FAULT_KINDS}
+        known = {k.name for k in FAULT_KINDS + EXTRA_KINDS} | {k.device for k in FAULT_KINDS}
         unknown = [w for w in wanted if w not in known]
         if unknown:
             raise ValueError(f"--faults: unknown fault kind(s) {unknown}; expected names from --list-faults "
                              f"or one of camera, piezo, plc")
-        kinds = tuple(k for k in FAULT_KINDS if k.name in wanted or k.device in wanted)
+        kinds = tuple(k for k in FAULT_KINDS if k.name in wanted or k.device in wanted) + \
+            tuple(k for k in EXTRA_KINDS if k.name in wanted)
     if targets_present is not None:
         kinds = tuple(k for k in kinds if k.device in targets_present)
     return kinds

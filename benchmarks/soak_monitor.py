@@ -1,10 +1,16 @@
-"""The soak's monitor thread: samples VmRSS and the counters, notices PLC watchdog trips and stuck stations.
+"""The soak's monitor thread: samples VmRSS and the counters, classifies PLC watchdog trips, plays the operator.
 
-A station is *stuck* when it has produced no valid result, or its PLC watchdog has stayed tripped,
-for ``--stuck-s`` seconds while no fault is active (counted from the station's own start), or no
-result at all ``--startup-s`` after it started (a loaded machine starts slowly). The
-monitor then asks the runner for a fresh station (``--on-failure restart``), stops the soak
-(``stop``) or only reports it (``continue``).
+Each PLC watchdog trip is classified (:mod:`soak_trips`): fail-safe after a PLC outage longer than
+the watchdog, else a FAILURE. A tripped watchdog is re-armed by the operator (:mod:`soak_operator`)
+``--operator-rearm-s`` after it was first seen, and the same station goes on.
+
+A station is *stuck* when it has produced no valid result for ``--stuck-s`` seconds while no fault
+is active (counted from the station's own start), or no result at all ``--startup-s`` after it
+started (a loaded machine starts slowly). The monitor then asks the runner for a fresh station
+(``--on-failure restart``), stops the soak (``stop``) or only reports it (``continue``). A
+watchdog still tripped after ``--stuck-s`` (outputs silent: the operator's re-arm failed or is
+off) is reported as stuck too, but no fresh station is built for it: an operator re-arm, not a
+rebuild, recovers a trip.
 """
 
 from __future__ import annotations
@@ -17,7 +23,9 @@ import tracemalloc
 from typing import Any
 
 from soak_observe import Observer, Window
+from soak_operator import Operator
 from soak_report import Sample
+from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip
 
 __all__ = ["Monitor", "rss_mb"]
 
@@ -35,9 +43,9 @@ class Monitor:
     """Samples RSS and counters, notices PLC watchdog trips and stuck stations."""
 
     def __init__(self, args: argparse.Namespace, runner: Any, observer: Observer, failures: Any,
-                 scheduler: Any) -> None:
+                 scheduler: Any, operator: Operator | None = None, limits: TripLimits | None = None) -> None:
         self._args, self._runner, self._observer, self._failures = args, runner, observer, failures
-        self._scheduler = scheduler
+        self._scheduler, self.operator, self._limits = scheduler, operator, limits
         self.stop = threading.Event()
         self.samples: list[Sample] = []
         self.warm_snapshot: tracemalloc.Snapshot | None = None
@@ -50,6 +58,7 @@ class Monitor:
         self._tripped_since: float | None = None
         self._stuck_key: tuple[int, int] | None = None
         self._next_sample = 0.0
+        self.accepted_after_rearms: list[int] = []  # filled at the end of the run
 
     def run(self) -> None:
         while not self.stop.wait(0.5):
@@ -78,21 +87,51 @@ class Monitor:
 
     def _watch(self, t: float) -> None:
         _, trips = self._runner.totals()
-        window = self._observer.current
         if trips > self._trips_seen:
-            # before this station's first command the station re-arms a trip itself (slow first result)
-            startup = not self._observer.sent_this_station
-            window.startup_trips += (trips - self._trips_seen) if startup else 0
-            self._failures.add("startup_watchdog_trips" if startup else "watchdog_trips",
-                               f"t={t:.1f} s: PLC watchdog tripped (x{trips - self._trips_seen}) after "
-                               f"{window.kind} #{window.index}" + (" before this station's first command" if startup
-                                                                   else ""))
+            self._on_trips(t, trips - self._trips_seen)
             self._trips_seen = trips
         devices = self._runner.devices
         plc = devices.plc_simulator if devices is not None else None
         tripped = plc is not None and plc.watchdog_state.value == "tripped"
         self._tripped_since = (self._tripped_since or t) if tripped else None
-        self._check_stuck(t, window)
+        if tripped and self.operator is not None and self.operator.due(t, self._tripped_since):
+            self._rearm(t, plc)
+        self._check_stuck(t, self._observer.current)
+
+    def _on_trips(self, t: float, count: int) -> None:
+        """Classify ``count`` new trips: at start-up (the station re-arms itself), fail-safe, or FAILURE."""
+        window = self._observer.current
+        if not self._observer.sent_this_station:  # before this station's first command it re-arms a trip itself
+            window.startup_trips += count
+            self._failures.add("startup_watchdog_trips", f"t={t:.1f} s: PLC watchdog tripped (x{count}) after "
+                                                         f"{window.kind} #{window.index} before this station's "
+                                                         "first command")
+            return
+        if self._limits is None:
+            verdict, cause = FAILURE, window
+        else:
+            verdict, cause = classify_trip(t, list(self._observer.windows), self._limits)
+        if verdict == FAILSAFE:
+            cause.trips_failsafe += count
+            self._failures.add("failsafe_trips", f"t={t:.1f} s: PLC watchdog tripped (x{count}) after {cause.kind} "
+                                                 f"#{cause.index} ({cause.params}): fail-safe")
+        else:
+            cause.trips_failure += count
+            self._failures.add("trip_failures", f"t={t:.1f} s: PLC watchdog tripped (x{count}) after {cause.kind} "
+                                                f"#{cause.index} ({cause.params}): no PLC outage of >= "
+                                                f"{self._limits.outage_s if self._limits else 0:.2f} s explains it")
+
+    def _rearm(self, t: float, plc: Any) -> None:
+        """The operator's ``wavestack plc rearm``; the same station goes on."""
+        assert self.operator is not None and self._tripped_since is not None
+        done = self.operator.rearm(plc, self._runner.incarnation, t, self._tripped_since)
+        if done is None:
+            self._failures.add("rearm_errors", self.operator.errors[-1])
+            return
+        self._observer.current.rearms += 1
+        self._failures.add("operator_rearms", f"t={t:.1f} s: operator re-armed the PLC watchdog (tripped "
+                                              f"{done.tripped_for_s:.1f} s; status after: {done.status})")
+        self._tripped_since = None
 
     def _check_stuck(self, t: float, window: Window) -> None:
         if self._runner.devices is None or (window.clear_t_s is not None and t < window.clear_t_s):
@@ -115,6 +154,8 @@ class Monitor:
         text = f"t={t:.1f} s: {why} after {window.kind} #{window.index}"
         window.stuck = why
         self._failures.add("stuck", text)
+        if why.startswith("PLC watchdog"):
+            return  # only an operator re-arm recovers a trip: a fresh station would only hide it
         if self._args.on_failure == "restart":
             self._runner.request_restart()
         elif self._args.on_failure == "stop":

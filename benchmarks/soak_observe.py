@@ -75,6 +75,11 @@ class Window:
     crashes: list[str] = field(default_factory=list)
     stuck: str | None = None
     startup_trips: int = 0
+    trips_failsafe: int = 0  # PLC watchdog trips this fault explains (a PLC outage longer than the watchdog)
+    trips_failure: int = 0  # trips while this window was current that no PLC outage explains
+    rearms: int = 0  # operator re-arms while this window was current
+    plc_down_s: float = 0.0
+    plc_reply_delay_s: float = 0.0
     tripped_at_end: bool = False
     incarnation: int = 0
     start_snapshot: dict[str, int] = field(default_factory=dict)
@@ -92,6 +97,8 @@ class Window:
                 "reasons": dict(self.reasons), "recovered_after_s": _round(self.first_valid_after_clear_s),
                 "outputs_resumed_after_s": _round(self.first_sent_after_clear_s), "crashes": self.crashes,
                 "stuck": self.stuck, "startup_watchdog_trips": self.startup_trips,
+                "failsafe_trips": self.trips_failsafe, "trip_failures": self.trips_failure,
+                "operator_rearms": self.rearms,
                 "watchdog_tripped_at_end": self.tripped_at_end}
 
 

@@ -17,12 +17,15 @@ from soak_faults import FAULT_KINDS
 from soak_observe import Window
 
 __all__ = ["GrowthSite", "RssVerdict", "Sample", "fault_problems", "growth_sites", "render_text", "rss_verdict",
-           "verdict_json"]
+           "unsafe_commands", "verdict_json"]
 
 _KINDS = {kind.name: kind for kind in FAULT_KINDS}
-# faults during which no command may reach the PLC (issue 13: commands while the PLC is not scanning)
-_NO_COMMANDS_WHILE = {"plc_freeze_echo": "the heartbeat echo was frozen (PLC not scanning)",
-                      "plc_estop": "the e-stop was pressed"}
+# faults during which no command may reach the PLC (issue 13: commands while the PLC is not scanning), and
+# how many may: the echo had advanced since the previous command when the echo froze, so the link may
+# send one more command before it can see that the PLC stopped scanning (and the result of a command
+# sent just before the fault is counted in its window); a second one had no scan before it
+_NO_COMMANDS_WHILE = {"plc_freeze_echo": ("the heartbeat echo was frozen (PLC not scanning)", 1),
+                      "plc_estop": ("the e-stop was pressed", 0)}
 RECOVERY_GRACE_S = 5.0  # a fault followed this soon by the next one is not judged on its recovery
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -58,10 +61,16 @@ class RssVerdict:
     tolerance_pct: float
     flat: bool
     traced_slope_mb_per_min: float | None = None
+    station_run: int = 1
+    station_runs: int = 1
 
 
 def rss_verdict(samples: list[Sample], warmup_s: float, tolerance_pct: float = 5.0) -> RssVerdict:
-    """Fit RSS against time over the samples after ``warmup_s``; flat if every one is within the tolerance.
+    """Fit RSS against time over the samples after ``warmup_s`` of the last station; flat if all within tolerance.
+
+    Only the last station's samples count (``Sample.restarts`` numbers the stations): a rebuilt
+    station allocates a new heap (about 50 MB of arrays on the default station) while the
+    allocator keeps the old one mapped, so RSS across a rebuild says nothing about a leak.
 
     Examples
     --------
@@ -70,10 +79,12 @@ def rss_verdict(samples: list[Sample], warmup_s: float, tolerance_pct: float = 5
     >>> round(v.slope_mb_per_min, 2), v.flat
     (0.6, True)
     """
-    late = [s for s in samples if s.t_s >= warmup_s]
+    station = samples[-1].restarts if samples else 0
+    late = [s for s in samples if s.t_s >= warmup_s and s.restarts == station]
     if len(late) < 2:
         nan = float("nan")
-        return RssVerdict(len(late), warmup_s, nan, nan, nan, nan, nan, tolerance_pct, False)
+        return RssVerdict(len(late), warmup_s, nan, nan, nan, nan, nan, tolerance_pct, False, None, station + 1,
+                          station + 1)
     t = np.array([s.t_s for s in late]) / 60.0
     rss = np.array([s.rss_mb for s in late])
     mean = float(rss.mean())
@@ -81,7 +92,7 @@ def rss_verdict(samples: list[Sample], warmup_s: float, tolerance_pct: float = 5
     traced = [s.traced_mb for s in late]
     traced_slope = float(np.polyfit(t, np.array(traced), 1)[0]) if None not in traced else None
     return RssVerdict(len(late), warmup_s, float(np.polyfit(t, rss, 1)[0]), mean, float(rss[0]), float(rss[-1]),
-                      deviation, tolerance_pct, deviation <= tolerance_pct, traced_slope)
+                      deviation, tolerance_pct, deviation <= tolerance_pct, traced_slope, station + 1, station + 1)
 
 
 @dataclass(frozen=True)
@@ -119,6 +130,13 @@ def growth_sites(before: tracemalloc.Snapshot, after: tracemalloc.Snapshot, span
     return sites
 
 
+def unsafe_commands(window: Window) -> int:
+    """Commands sent during a fault that forbids them, beyond those the link may send before it can see it."""
+    if window.kind not in _NO_COMMANDS_WHILE:
+        return 0
+    return max(0, window.counts.get("sent_while_active", 0) - _NO_COMMANDS_WHILE[window.kind][1])
+
+
 def fault_problems(window: Window) -> list[str]:
     """What went wrong with one fault (empty: injected, seen in the counters/results, recovered)."""
     if window.skipped:
@@ -132,12 +150,13 @@ def fault_problems(window: Window) -> list[str]:
         problems.append("never fired")
     elif kind is not None and kind.expects and not any(signals.get(name) for name in kind.expects):
         problems.append("UNACCOUNTED (expected " + " or ".join(kind.expects) + ")")
-    unsafe = window.counts.get("sent_while_active", 0)
-    if unsafe and window.kind in _NO_COMMANDS_WHILE:
-        problems.append(f"UNSAFE: {unsafe} commands sent while {_NO_COMMANDS_WHILE[window.kind]}")
-    trips = signals.get("watchdog_trips", 0) - window.startup_trips
-    if trips > 0:
-        problems.append(f"WATCHDOG TRIPPED x{trips}")
+    unsafe = unsafe_commands(window)
+    if unsafe:
+        what, allowed = _NO_COMMANDS_WHILE[window.kind]
+        problems.append(f"UNSAFE: {unsafe} commands sent while {what}" + (f" (beyond the {allowed} the link may send "
+                                                                            "before it can see it)" if allowed else ""))
+    if window.trips_failure > 0:
+        problems.append(f"WATCHDOG TRIPPED x{window.trips_failure} (FAILURE: no PLC outage explains it)")
     observed_s = (window.end_t_s or 0.0) - (window.clear_t_s or 0.0)
     if window.clear_t_s is not None and window.first_valid_after_clear_s is None and not window.crashes \
             and not window.stuck and observed_s >= RECOVERY_GRACE_S:
@@ -165,13 +184,15 @@ def _by_kind(windows: list[Window]) -> dict[str, dict[str, int]]:
         if w.index < 0:
             continue
         row = table.setdefault(w.kind, {"injected": 0, "accounted": 0, "problems": 0, "crashes": 0,
-                                        "watchdog_trips": 0})
+                                        "failsafe_trips": 0, "trip_failures": 0, "operator_rearms": 0})
         problems = fault_problems(w)
         row["injected"] += not w.skipped
         row["accounted"] += not w.skipped and not any(p.startswith(("UNACCOUNTED", "never")) for p in problems)
         row["problems"] += bool(problems)
         row["crashes"] += len(w.crashes)
-        row["watchdog_trips"] += w.signals().get("watchdog_trips", 0)
+        row["failsafe_trips"] += w.trips_failsafe
+        row["trip_failures"] += w.trips_failure
+        row["operator_rearms"] += w.rearms
     return table
 
 
@@ -181,7 +202,8 @@ def verdict_json(run: dict[str, Any], samples: list[Sample], rss: RssVerdict, wi
     faults = [w for w in windows if w.index >= 0]
     unaccounted = [w.index for w in faults if any(p.startswith("UNACCOUNTED") for p in fault_problems(w))]
     exceptions = len(failures["thread_exceptions"]) + len(failures["station_crashes"])
-    station_failures = sum(len(failures[k]) for k in ("watchdog_trips", "stuck", "counters_backwards"))
+    unsafe = sum(unsafe_commands(w) for w in faults)
+    station_failures = sum(len(failures[k]) for k in ("trip_failures", "stuck", "counters_backwards"))
     station_failures += len(failures["injection_errors"])
     station_failures += sum(1 for w in faults if any(p.startswith(("no valid", "outputs silent", "UNSAFE"))
                                                       for p in fault_problems(w)))
@@ -191,6 +213,8 @@ def verdict_json(run: dict[str, Any], samples: list[Sample], rss: RssVerdict, wi
             "faults": [w.to_json() | {"problems": fault_problems(w)} for w in faults],
             "baseline": windows[0].to_json(), "by_kind": _by_kind(windows), "failures": failures,
             "unaccounted": unaccounted, "unhandled_exceptions": exceptions, "station_failures": station_failures,
+            "failsafe_trips": len(failures["failsafe_trips"]), "trip_failures": len(failures["trip_failures"]),
+            "operator_rearms": len(failures["operator_rearms"]), "unsafe_commands": unsafe,
             "growth_sites": None if sites is None else [asdict(s) for s in sites], "targets": targets,
             "passed": all(targets.values())}
 
@@ -209,6 +233,15 @@ def _sample_rows(samples: list[Sample], every_s: float) -> list[str]:
     return rows
 
 
+def _rearm_text(run: dict[str, Any]) -> str:
+    rearms = run.get("rearms", [])
+    if not run.get("operator_rearm_s"):
+        return "operator re-arms: off"
+    after = [r["accepted_after"] for r in rearms if r["accepted_after"] is not None and r["accepted_after"] >= 0]
+    text = f"operator re-arms: {len(rearms)} ({run['operator_rearm_s']:g} s after a trip)"
+    return text + (f", PLC accepted {after[-1]} commands after the last" if after else "")
+
+
 def render_text(report: dict[str, Any], samples: list[Sample], windows: list[Window], every_s: float,
                 summary_lines: list[str]) -> str:
     """The plain-text report: samples, faults, faults by kind, failures, growth sites, verdict."""
@@ -217,10 +250,11 @@ def render_text(report: dict[str, Any], samples: list[Sample], windows: list[Win
     lines += _sample_rows(samples, every_s) + [""]
     if len(windows) > 1:
         lines += ["## faults (injected -> what the results and counters show)", *_fault_rows(windows), ""]
-        lines += ["| kind | injected | accounted | with problems | crashes | watchdog trips |",
-                  "|---|---:|---:|---:|---:|---:|"]
+        lines += ["| kind | injected | accounted | with problems | crashes | fail-safe trips | trip failures | "
+                  "operator re-arms |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
         lines += [f"| {k} | {v['injected']} | {v['accounted']} | {v['problems']} | {v['crashes']} | "
-                  f"{v['watchdog_trips']} |" for k, v in sorted(report["by_kind"].items())] + [""]
+                  f"{v['failsafe_trips']} | {v['trip_failures']} | {v['operator_rearms']} |"
+                  for k, v in sorted(report["by_kind"].items())] + [""]
     for name, entries in report["failures"].items():
         lines += [f"{name.replace('_', ' ')}: {len(entries)}"] + [f"  - {e}" for e in entries[:20]]
     if report["growth_sites"] is not None:
@@ -230,7 +264,8 @@ def render_text(report: dict[str, Any], samples: list[Sample], windows: list[Win
                   f"{s['bytes_per_result']:.0f} |" for s in report["growth_sites"]]
     traced = "" if rss["traced_slope_mb_per_min"] is None else \
         f"; traced Python memory {rss['traced_slope_mb_per_min']:+.3f} MB/min"
-    lines += ["", "## verdict", f"RSS after the {rss['warmup_s']:.0f} s warm-up ({rss['samples']} samples): slope "
+    lines += ["", "## verdict", f"RSS after the {rss['warmup_s']:.0f} s warm-up, over one station's life (station "
+              f"run {rss['station_run']}, {rss['samples']} samples): slope "
               f"{rss['slope_mb_per_min']:+.3f} MB/min, {rss['first_mb']:.1f} -> {rss['last_mb']:.1f} MB, mean "
               f"{rss['mean_mb']:.1f} MB, max deviation {rss['max_deviation_pct']:.2f} % (target +-"
               f"{rss['tolerance_pct']:g} %){traced}",
@@ -239,6 +274,10 @@ def render_text(report: dict[str, Any], samples: list[Sample], windows: list[Win
               f"{len(report['unaccounted'])} unaccounted {report['unaccounted'] or ''}".rstrip(),
               f"unhandled exceptions: {report['unhandled_exceptions']}; station failures: "
               f"{report['station_failures']}",
+              f"PLC watchdog trips (after the first command): {report['failsafe_trips']} fail-safe, "
+              f"{report['trip_failures']} FAILURE; {_rearm_text(run)}; station rebuilds: {run['restarts']}",
+              f"UNSAFE commands (sent while the PLC was not scanning or the e-stop was pressed): "
+              f"{report['unsafe_commands']}",
               f"results: {run['results']} ({run['valid']} valid) in {run['elapsed_s']:.1f} s: "
               f"{run['results_per_s']:.2f}/s", *summary_lines,
               "targets: " + ", ".join(f"{k} {'met' if v else 'MISSED'}" for k, v in report["targets"].items())]

@@ -20,12 +20,13 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from soak_faults import FAULT_KINDS, make_schedule, select_kinds  # noqa: E402
 from soak_observe import Window  # noqa: E402
 from soak_report import Sample, fault_problems, rss_verdict  # noqa: E402
+from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip  # noqa: E402
 
 SMALL = ROOT / "tests" / "configs" / "station-small.toml"
 
 
-def _samples(rss_of_t) -> list[Sample]:
-    return [Sample(float(t), rss_of_t(t), None, 0, 0, 0, 0, 0, 0, 0, 0) for t in range(0, 600, 5)]
+def _samples(rss_of_t, restarts_of_t=lambda t: 0) -> list[Sample]:
+    return [Sample(float(t), rss_of_t(t), None, 0, 0, 0, 0, 0, 0, 0, restarts_of_t(t)) for t in range(0, 600, 5)]
 
 
 def test_the_schedule_is_seeded_spaced_and_stops_before_the_end() -> None:
@@ -54,6 +55,58 @@ def test_rss_is_flat_within_five_percent_and_a_creep_is_not() -> None:
     assert not creep.flat and creep.slope_mb_per_min == pytest.approx(5.0)
 
 
+def test_rss_is_judged_over_the_last_station_only() -> None:
+    # a rebuild at 300 s adds 50 MB of new heap: across it RSS jumps, within each station it is flat
+    samples = _samples(lambda t: 400.0 if t < 300 else 450.0, lambda t: int(t >= 300))
+    verdict = rss_verdict(samples, warmup_s=60.0)
+    assert verdict.flat and verdict.station_run == 2 and verdict.samples == 60
+    assert not rss_verdict(_samples(lambda t: 400.0 if t < 300 else 450.0), warmup_s=60.0).flat
+
+
+LIMITS = TripLimits(watchdog_timeout_s=2.0, heartbeat_period_s=0.5, io_timeout_s=0.5)  # the default station
+
+
+def _windows(*faults: Window) -> list[Window]:
+    return [Window(-1, "baseline", 0.0), *faults]
+
+
+@pytest.mark.parametrize(("fault", "trip_t_s", "expected"), [
+    (Window(0, "plc_restart", 10.0, clear_t_s=12.2, plc_down_s=2.2), 12.3, FAILSAFE),  # down > watchdog
+    (Window(0, "plc_restart", 10.0, clear_t_s=11.6, plc_down_s=1.6), 13.0, FAILSAFE),  # + a reconnect back-off
+    (Window(0, "plc_restart", 10.0, clear_t_s=11.0, plc_down_s=1.0), 12.0, FAILURE),  # short: a heartbeat is due
+    (Window(0, "plc_delay", 10.0, clear_t_s=12.8, plc_reply_delay_s=0.65), 12.1, FAILSAFE),  # > io timeout, 2.8 s
+    (Window(0, "plc_delay", 10.0, clear_t_s=13.0, plc_reply_delay_s=0.4), 12.1, FAILURE),  # answers in time
+    (Window(0, "plc_delay", 10.0, clear_t_s=11.2, plc_reply_delay_s=1.4), 11.5, FAILURE),  # late, but 1.2 s only
+    (Window(0, "plc_freeze_echo", 10.0, clear_t_s=13.0), 12.0, FAILURE),  # reachable: the host must keep beating
+    (Window(0, "camera_unplug_long", 10.0, clear_t_s=15.0), 12.0, FAILURE),
+    (Window(0, "plc_restart", 10.0, clear_t_s=12.2, plc_down_s=2.2), 30.0, FAILURE),  # long after the outage
+    (Window(0, "plc_restart", 10.0, clear_t_s=12.2, plc_down_s=2.2), 9.0, FAILURE),  # before it
+])
+def test_a_trip_is_fail_safe_only_after_a_plc_outage_longer_than_the_watchdog(fault: Window, trip_t_s: float,
+                                                                            expected: str) -> None:
+    verdict, cause = classify_trip(trip_t_s, _windows(fault), LIMITS)
+    assert verdict == expected
+    assert cause is fault if trip_t_s >= fault.t_s else cause.index == -1
+
+
+def test_a_trip_after_a_camera_fault_is_charged_to_it_even_after_an_old_outage() -> None:
+    outage = Window(0, "plc_restart", 10.0, clear_t_s=12.5, plc_down_s=2.5)
+    camera = Window(1, "camera_stall", 20.0, clear_t_s=20.0)
+    assert classify_trip(13.0, _windows(outage, camera), LIMITS) == (FAILSAFE, outage)
+    assert classify_trip(21.0, _windows(outage, camera), LIMITS) == (FAILURE, camera)
+
+
+def test_only_an_unexplained_trip_is_a_fault_problem() -> None:
+    window = Window(2, "plc_restart", 10.0, clear_t_s=12.5, end_t_s=20.0, plc_down_s=2.5)
+    window.results = window.valid = 30
+    window.first_valid_after_clear_s = 0.5
+    window.counts["heartbeat_errors"] = 5
+    window.trips_failsafe = 1
+    assert fault_problems(window) == []
+    window.trips_failure = 1
+    assert fault_problems(window) == ["WATCHDOG TRIPPED x1 (FAILURE: no PLC outage explains it)"]
+
+
 def test_a_fault_without_its_evidence_is_unaccounted() -> None:
     window = Window(3, "camera_unplug_short", 10.0, clear_t_s=10.5, end_t_s=20.0)
     window.results = window.valid = 12
@@ -71,8 +124,16 @@ def test_a_command_sent_while_the_plc_is_not_scanning_is_unsafe() -> None:
     window.first_valid_after_clear_s = 0.1
     window.counts.update(heartbeat_errors=6)
     assert fault_problems(window) == []
-    window.counts["sent_while_active"] = 6
-    assert fault_problems(window) == ["UNSAFE: 6 commands sent while the heartbeat echo was frozen (PLC not scanning)"]
+    window.counts["sent_while_active"] = 1  # the echo had advanced since the previous command: one may go
+    assert fault_problems(window) == []
+    window.counts["sent_while_active"] = 6  # five with no PLC scan before them
+    assert fault_problems(window) == ["UNSAFE: 5 commands sent while the heartbeat echo was frozen (PLC not scanning) "
+                                      "(beyond the 1 the link may send before it can see it)"]
+    estop = Window(6, "plc_estop", 10.0, clear_t_s=13.0, end_t_s=20.0)
+    estop.results = estop.valid = 20
+    estop.first_valid_after_clear_s = 0.1
+    estop.counts.update(estop_seen=5, sent_while_active=1)
+    assert fault_problems(estop) == ["UNSAFE: 1 commands sent while the e-stop was pressed"]
 
 
 def _soak(*options: str, timeout_s: float = 240.0) -> dict:
@@ -109,3 +170,19 @@ def test_a_dense_plc_fault_soak_leaves_no_exception() -> None:
                    "plc_drop_replies,plc_truncate_replies,plc_corrupt_replies", "--on-failure", "stop")
     assert report["failures"]["station_crashes"] == [] and report["unhandled_exceptions"] == 0, report["failures"]
     assert report["unaccounted"] == [] and report["last_summary"] is not None
+
+
+@pytest.mark.slow
+def test_the_operator_rearms_a_fail_safe_trip_and_the_same_station_sends_commands_again() -> None:
+    # one PLC outage of 2.6-3 s (longer than the 2 s watchdog) about 10 s after the first result
+    report = _soak("--duration-s", "25", "--fault-every-s", "10", "--seed", "1", "--faults", "plc_outage",
+                   "--operator-rearm-s", "2", "--on-failure", "stop")
+    faults = [f for f in report["faults"] if not f["skipped"]]
+    assert [f["kind"] for f in faults] == ["plc_outage"], faults
+    assert report["failsafe_trips"] >= 1 and report["trip_failures"] == 0, report["failures"]
+    assert report["operator_rearms"] >= 1 and report["failures"]["stuck"] == [], report["failures"]
+    rearms = report["run"]["rearms"]
+    # the PLC simulator accepted (valid, gated) commands from the same station after the last re-arm
+    assert rearms and rearms[-1]["status"] == "ok" and rearms[-1]["accepted_after"] >= 1, rearms
+    assert report["run"]["restarts"] == 0 and report["run"]["crashes"] == 0
+    assert not faults[-1]["watchdog_tripped_at_end"] and report["unhandled_exceptions"] == 0
