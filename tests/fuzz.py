@@ -1,7 +1,8 @@
 """Hypothesis settings for the property tests of the parsers we own.
 
-Each parser test asks for a number of examples that keeps CI quick (a few hundred); the ``long``
-profile, loaded with ``pytest --hypothesis-profile=long``, raises every one of them to 10,000
+Each parser test asks for a number of examples that keeps CI quick (a few hundred), drawn the same
+way on every run (the ``ci`` profile is derandomised); the ``long`` profile, loaded with
+``pytest --hypothesis-profile=long``, draws afresh and raises every one of them to 10,000
 (see the README, "Faults and safety"). Tests that fuzz a parser use :func:`fuzz_settings`
 instead of writing ``max_examples`` themselves, so the long profile reaches them all.
 """
@@ -12,9 +13,12 @@ from hypothesis import HealthCheck, settings
 
 LONG_EXAMPLES = 10_000
 
-settings.register_profile("ci", deadline=None, database=None, print_blob=True)
+# "ci", loaded by default (tests/conftest.py): the same examples on every run, so a red CI is a
+# regression and never the luck of the draw; "long" draws afresh each run, to explore.
+settings.register_profile("ci", deadline=None, database=None, print_blob=True, derandomize=True)
 settings.register_profile("long", deadline=None, database=None, max_examples=LONG_EXAMPLES,
                           suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("ci")  # pytest --hypothesis-profile=long loads "long" over it
 
 
 def fuzz_settings(ci_examples: int = 300) -> settings:
