@@ -22,6 +22,7 @@ from fuzz import fuzz_settings
 from hypothesis import example, given
 from hypothesis import strategies as st
 
+from camera_hooks import AcceptingHooks
 from wavestack.drivers.errors import ProtocolError
 from wavestack.drivers.u3v import bootstrap as bs
 from wavestack.drivers.u3v import gencp
@@ -223,23 +224,6 @@ def test_a_sirm_with_an_absurd_alignment_is_refused() -> None:
         bs.decode_sirm(struct.pack("<IIQII", 0xFF << 24, 0, 4096, 52, 32) + bytes(24), DEVICE)
 
 
-class _Hooks:
-    def device_time_ns(self) -> int:
-        return 0
-
-    def get_feature(self, name: str) -> int | float:
-        return 1.0 if name == "ExposureTime" else 1
-
-    def set_feature(self, name: str, value: int | float) -> GenCPStatus:
-        return GenCPStatus.SUCCESS
-
-    def get_stream_register(self, offset: int) -> int:
-        return 0
-
-    def set_stream_register(self, offset: int, value: int) -> GenCPStatus:
-        return GenCPStatus.SUCCESS
-
-
 printable = st.text(st.characters(min_codepoint=33, max_codepoint=126), min_size=1, max_size=64)
 
 
@@ -248,7 +232,7 @@ printable = st.text(st.characters(min_codepoint=33, max_codepoint=126), min_size
 def test_the_simulators_bootstrap_manifest_and_xml_decode_in_the_driver(manufacturer: str, model: str, serial: str,
                                                                       zipped: bool) -> None:
     identity = DeviceIdentity(manufacturer, model, "Sim", "1.0", "fuzz", serial, 200, 1024, 1024)
-    registers = build_register_map(identity, _Hooks(), zipped_xml=zipped)
+    registers = build_register_map(identity, AcceptingHooks(), zipped_xml=zipped)
 
     def read(address: int, length: int) -> bytes:
         status, data = registers.read(address, length)

@@ -13,6 +13,7 @@ from fuzz import fuzz_settings
 from hypothesis import given
 from hypothesis import strategies as st
 
+from camera_hooks import AcceptingHooks
 from wavestack.simulators.u3v import gencp_device as sim
 from wavestack.simulators.u3v.device_description import FEATURES, DeviceIdentity
 from wavestack.simulators.u3v.register_map import GenCPStatus
@@ -22,25 +23,6 @@ from wavestack.simulators.u3v.registers import (MANIFEST_ADDRESS, SBRM_ADDRESS, 
 IDENTITY = DeviceIdentity("Wavestack", "SimCam", "Sim", "1.0", "fuzz", "0001", 200, 1024, 1024)
 STARTS = [0, 0x1C4, 0x1F8, SBRM_ADDRESS, SIRM_ADDRESS, MANIFEST_ADDRESS, XML_ADDRESS,
           *[spec.address for spec in FEATURES]]
-
-
-class _Hooks:
-    """The camera behind the registers, reduced to accepting everything."""
-
-    def device_time_ns(self) -> int:
-        return 123
-
-    def get_feature(self, name: str) -> int | float:
-        return 1.0 if name == "ExposureTime" else 1
-
-    def set_feature(self, name: str, value: int | float) -> GenCPStatus:
-        return GenCPStatus.SUCCESS
-
-    def get_stream_register(self, offset: int) -> int:
-        return 0
-
-    def set_stream_register(self, offset: int, value: int) -> GenCPStatus:
-        return GenCPStatus.SUCCESS
 
 
 def _command(command_id: int, request_id: int, scd: bytes, flags: int = sim.FLAG_REQUEST_ACK) -> bytes:
@@ -61,7 +43,7 @@ commands = st.one_of(
 @fuzz_settings(300)
 @given(packets=st.lists(commands, min_size=1, max_size=6), zipped=st.booleans())
 def test_any_command_is_answered_with_a_framed_acknowledge_or_nothing(packets: list[bytes], zipped: bool) -> None:
-    device = sim.GenCPDevice(build_register_map(IDENTITY, _Hooks(), zipped_xml=zipped), max_command_bytes=1024,
+    device = sim.GenCPDevice(build_register_map(IDENTITY, AcceptingHooks(123), zipped_xml=zipped), max_command_bytes=1024,
                              max_ack_bytes=1024)
     for packet in packets:
         ack = device.execute(packet)

@@ -25,6 +25,15 @@ def _run_in_thread(station, stop: threading.Event, records: list[CycleRecord]) -
     return thread
 
 
+def _stop_and_time(stop: threading.Event, thread: threading.Thread, station) -> float:
+    """Stop a running station and close it; the seconds that took."""
+    started = time.monotonic()
+    stop.set()
+    thread.join(timeout=30.0)
+    station.close()
+    return time.monotonic() - started
+
+
 def test_stop_is_prompt_with_a_ten_second_settle_time(station_factory, thread_errors) -> None:
     config = fault_config()
     config = replace(config, pzt=replace(config.pzt, settle_s=10.0))
@@ -34,11 +43,7 @@ def test_stop_is_prompt_with_a_ten_second_settle_time(station_factory, thread_er
     try:
         assert _wait_for(lambda: any(c.startswith("xvoltage=") for c in devices.bench.piezo.commands), 10.0)
         time.sleep(0.3)  # inside the first settle wait
-        started = time.monotonic()
-        stop.set()
-        thread.join(timeout=30.0)
-        station.close()
-        took = time.monotonic() - started
+        took = _stop_and_time(stop, thread, station)
     finally:
         stop.set()
         thread.join()
@@ -55,11 +60,7 @@ def test_stop_is_prompt_while_a_camera_is_away(station_factory, thread_errors) -
         assert _wait_for(lambda: any(r.result.valid for r in records), 30.0)
         camera.unplug()
         assert _wait_for(lambda: sum(not r.result.valid for r in records) >= 4, 30.0)  # backing off longer
-        started = time.monotonic()
-        stop.set()
-        thread.join(timeout=30.0)
-        station.close()
-        took = time.monotonic() - started
+        took = _stop_and_time(stop, thread, station)
     finally:
         stop.set()
         thread.join()
