@@ -22,6 +22,8 @@ from wavestack.simulators.surface import SurfaceState
 
 __all__ = ["SurfacePhase", "SurfaceView"]
 
+_TWO_PI = 2.0 * np.pi
+
 
 @dataclass(frozen=True, eq=False)
 class SurfaceView:
@@ -112,11 +114,13 @@ class SurfacePhase:
     def _make(self, aperture_revision: int, surface_revision: int, heights: NDArray[np.float64],
               index: NDArray[np.intp], base_phase: NDArray[np.float64], phase: NDArray[np.float32],
               wavefront: NDArray[np.float64]) -> SurfaceView:
-        waves = np.take(heights, index) * self._waves_per_nm
-        inside = np.mod(base_phase + 2.0 * np.pi * waves, 2.0 * np.pi).astype(np.float32)
+        waves = np.take(heights, index)
+        waves *= self._waves_per_nm
+        inside = base_phase + _TWO_PI * waves
+        inside -= _TWO_PI * np.floor(inside * (1.0 / _TWO_PI))  # wrapped (np.mod is ~20x slower per element)
         new_phase = phase.copy()
-        new_phase.reshape(-1)[index] = inside
+        new_phase.reshape(-1)[index] = inside  # cast to float32 after the wrap
         new_wavefront = wavefront.copy()
-        new_wavefront.reshape(-1)[index] += waves
+        new_wavefront.reshape(-1)[index] = np.take(wavefront, index) + waves
         return SurfaceView(aperture_revision=aperture_revision, surface_revision=surface_revision, heights_nm=heights,
                            phase=read_only(new_phase), wavefront=read_only(new_wavefront))
