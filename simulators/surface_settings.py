@@ -31,7 +31,8 @@ class SurfaceSettings:
         empty for none.
     map_file : str or None
         A measured map (``.dat``, ``.datx``, 4D ``.h5``, or a ``.npy`` array in nm, NaN where not
-        measured), scaled so that its measured region spans the aperture's circumscribing disk.
+        measured), scaled so that its measured region spans the aperture's circumscribing disk. A
+        relative name is read from the working directory (a station file's from the file's folder).
     map_rms_nm : float or None
         RMS (piston removed) of the measured map over the aperture, nm, ``> 0``; None keeps the
         file's own heights. Only with ``map_file``.
