@@ -136,7 +136,8 @@ class TestOptic:
     -----
     Deterministic: two optics with the same settings, size and call sequence render identical
     frames. Thread-safe: frames may be rendered from a camera thread while another thread
-    changes the aperture (a frame uses one aperture throughout).
+    changes the aperture or polishes the surface (a frame uses one aperture and one surface
+    revision throughout).
     """
 
     __test__ = False  # a library class, not a pytest test class, despite its name
@@ -271,7 +272,7 @@ class TestOptic:
         index = base_phase = None
         if self._surface is not None:
             index = np.flatnonzero(mask)
-            base_phase = 2.0 * np.pi * products[:, 0] + np.broadcast_to(carrier, mask.shape).reshape(-1)[index]
+            base_phase = 2.0 * np.pi * products[:, 0] + (carrier.reshape(-1)[index] if np.ndim(carrier) else carrier)
         scale = settings.full_scale
         amplitude = np.where(mask, np.float32(settings.modulation * scale), np.float32(0.0))
         offset = np.where(mask, np.float32(settings.background * scale), np.float32(settings.halo * scale))

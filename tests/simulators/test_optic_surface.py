@@ -160,3 +160,18 @@ def test_reflection_factor_and_wavelength_scale_the_wavefront() -> None:
     inside = truth.mask
     np.testing.assert_allclose(truth.wavefront_waves[inside], truth.surface_nm[inside] / 500.0, atol=1e-12)
     assert math.isclose(float(np.nanmax(truth.wavefront_waves)), float(truth.surface_nm[inside].max()) / 500.0)
+
+
+def test_a_zernike_surface_renders_as_the_same_zernike_wavefront_with_carrier() -> None:
+    waves = (0.0, 0.0, 0.0, 0.3, 0.1, -0.1, 0.05)
+    as_surface = SurfaceSettings(zernike_nm=tuple(c * WAVELENGTH_NM / 2.0 for c in waves), wavelength_nm=WAVELENGTH_NM)
+    carrier = (40.0, 10.0)
+    surfaced = optic_with(as_surface, carrier_cycles=carrier)
+    plain = optic_with(None, zernike_waves=waves, carrier_cycles=carrier)
+    for shift in (0.0, 1.1):
+        frame, truth = surfaced.interferogram(0.0, shift)
+        expected, plain_truth = plain.interferogram(0.0, shift)
+        # the same phase summed in another order: float32 rounding may move a count either way
+        assert np.max(np.abs(frame.astype(np.int64) - expected)) <= 1
+        np.testing.assert_allclose(truth.wavefront_waves[truth.mask], plain_truth.wavefront_waves[truth.mask],
+                                   atol=1e-12)
