@@ -116,8 +116,10 @@ def feed_profile(
     accel2 = 2.0 * max_accel_mm_s2 * (1.0 - PLAN_MARGIN)
     with np.errstate(divide="ignore"):
         cap = np.where(requested_s > 0, np.minimum(segment_mm / requested_s, feed_max), feed_max)
-    feed = _bounded_speeds(cap.tolist(), (accel2 * segment_mm).tolist(), accel2 * step_mm)
-    dwell = segment_mm / feed
+    speed = _bounded_speeds(cap.tolist(), (accel2 * segment_mm).tolist(), accel2 * step_mm)
+    # never an ulp short of the request (s / (s / d) may round below d); the feed follows the dwell
+    dwell = np.maximum(segment_mm / speed, requested_s)
+    feed = segment_mm / dwell
     floor = segment_mm / cap
     return FeedProfile(
         dwell_s=dwell,
