@@ -203,10 +203,16 @@ def spiral_order(has_dwell: NDArray[np.bool_]) -> tuple[NDArray[np.intp], NDArra
 def _bridged(i: NDArray[np.intp], j: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """Insert the lattice points on the line across every move longer than one step per axis."""
     jumps = np.maximum(np.abs(np.diff(i)), np.abs(np.diff(j)))
-    out_i, out_j = [i[:1]], [j[:1]]
-    for k in range(1, i.size):
-        n = int(jumps[k - 1])
-        t = np.arange(1, n + 1) / n
-        out_i.append(np.rint(i[k - 1] + t * (i[k] - i[k - 1])))
-        out_j.append(np.rint(j[k - 1] + t * (j[k] - j[k - 1])))
-    return np.concatenate(out_i).astype(np.intp), np.concatenate(out_j).astype(np.intp)
+    long_moves = np.flatnonzero(jumps > 1)
+    if long_moves.size == 0:
+        return i.astype(np.intp), j.astype(np.intp)
+    pieces_i, pieces_j, start = [], [], 0
+    for k in long_moves.tolist():  # the move from visit k to visit k + 1
+        n = int(jumps[k])
+        t = np.arange(1, n) / n
+        pieces_i += [i[start:k + 1], np.rint(i[k] + t * (i[k + 1] - i[k]))]
+        pieces_j += [j[start:k + 1], np.rint(j[k] + t * (j[k + 1] - j[k]))]
+        start = k + 1
+    pieces_i.append(i[start:])
+    pieces_j.append(j[start:])
+    return np.concatenate(pieces_i).astype(np.intp), np.concatenate(pieces_j).astype(np.intp)
