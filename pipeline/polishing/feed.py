@@ -120,7 +120,7 @@ def feed_profile(
     # never an ulp short of the request (s / (s / d) may round below d); the feed follows the dwell
     dwell = np.maximum(segment_mm / speed, requested_s)
     feed = segment_mm / dwell
-    floor = segment_mm / cap
+    floor = np.maximum(segment_mm / cap, requested_s)  # never an ulp below the request either
     return FeedProfile(
         dwell_s=dwell,
         feed_mm_s=feed,

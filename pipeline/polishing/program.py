@@ -42,12 +42,15 @@ def plan_program(
     dwells further (:mod:`.feed`); both additions are in :attr:`MachineProgram.report` and the
     log. The host should predict the removal from :meth:`MachineProgram.dwell_map`.
 
-    A floor that were uniform over the whole dwell grid, when that grid extends past the clear
-    aperture by the TIF radius, would remove a uniform depth (a piston) over the clear aperture
-    and change no figure; the floor is not uniform in general (it raises only short dwells, and
-    the crossed points outside the dwell region), so the extra dwell does change the figure a
-    little: a solver that knows the floor can take it into account (e.g. solve for the dwell
-    above the floor).
+    A floor that is uniform over the whole dwell grid is a piston over the clear aperture when
+    that grid extends past the aperture by the TIF radius: every aperture pixel then sees the
+    whole TIF inside the grid, so a uniform extra dwell removes a uniform depth and leaves the
+    figure unchanged. The floor applied here is not uniform (it raises only the short dwells,
+    and the points the tool crosses), so it changes the figure a little, which
+    :meth:`MachineProgram.dwell_map` shows. A host that wants the floor to cost no figure adds
+    it uniformly before planning (``step_mm / max_feed / step_px**2`` to every dwell-grid
+    pixel: the piston), so that no raster point inside the grid is raised by the feed limit
+    (the acceleration bound may still raise some).
 
     Parameters
     ----------

@@ -119,14 +119,19 @@ def _first(quantity: str, values: NDArray[np.float64], bad: NDArray[np.bool_], l
         raise ProgramRejected(quantity, float(values[k]), limit, k)
 
 
-def _check_acceleration(feed: NDArray[np.float64], segment: NDArray[np.float64], step_mm: float, max_accel: float) -> None:
+def _check_acceleration(
+    feed: NDArray[np.float64], segment: NDArray[np.float64], step_mm: float, max_accel: float
+) -> None:
     """Path acceleration between neighbours, from rest before the first point and to rest after the last."""
     squared = feed * feed
     before = np.concatenate(([0.0], squared[:-1]))
     change = np.abs(squared - before)
     slack = _ROUNDING_ULPS * np.finfo(np.float64).eps * np.maximum(squared, before)
-    accel = change / (2.0 * segment)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a zero-length move is refused earlier
+        accel = change / (2.0 * segment)
     _first("acceleration_mm_s2", accel, change - slack > 2.0 * max_accel * segment, max_accel)
     stop = squared[-1] / (2.0 * step_mm)
     if squared[-1] - slack[-1] > 2.0 * max_accel * step_mm:
-        raise ProgramRejected("acceleration_mm_s2 (stopping after the last point)", float(stop), max_accel, feed.size - 1)
+        raise ProgramRejected(
+            "acceleration_mm_s2 (stopping after the last point)", float(stop), max_accel, feed.size - 1
+        )
