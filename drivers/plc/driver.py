@@ -13,6 +13,7 @@ pymodbus ``ModbusTcpClient``) and adds what a closed loop needs from a PLC link:
   while it cannot be); an unknown held command is read back from the output block;
 - command limits (:class:`CommandLimits`: ``|removal|`` and the step from the held command), checked
   before the wire (:class:`CommandRefused`); :meth:`PolishingLink.restrict` only tightens them;
+- jobs (:mod:`.job_control`): read the machine block, load and start a job file, behind the same gate;
 - a start-up self-check of the float32 byte order that fails closed, and a write allow-list
   (:meth:`RegisterMap.check_write`) enforced before anything reaches the wire;
 - typed errors (:mod:`wavestack.drivers.errors`) naming unit, register and function code:
@@ -39,6 +40,8 @@ from wavestack.drivers.errors import DeviceTimeout, ProtocolError
 from wavestack.drivers.plc.commands import CommandLedger, CommandLimits, CommandRefused
 from wavestack.drivers.plc.gate import (HeartbeatEchoStale, PlcNotReady, command_refusal, decode_self_check,
                                        echo_lag_error, no_scan_since, not_ready)
+from wavestack.drivers.plc.job_control import JobControl
+from wavestack.drivers.plc.jobs import JobLedger, JobLimits
 from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused, registers_fit
 from wavestack.drivers.plc.status import (
     CommandAck,
@@ -58,8 +61,10 @@ _log = logging.getLogger(__name__)
 _WATCHDOG_EXCEPTION = 4
 
 
-class PolishingLink:
+class PolishingLink(JobControl):
     """Modbus/TCP link to the polishing-station PLC.
+
+    Commands publish the measured terms for the machine's display; removal happens only through jobs (:mod:`.job_control`).
 
     Parameters
     ----------
@@ -75,6 +80,8 @@ class PolishingLink:
     monitor
         An operator's second client (``wavestack plc status|rearm``) while a station runs: it never
         writes the heartbeat (that would disturb the station's echo) and never sends a command.
+    job_limits
+        Limits every job must meet before the wire; None: loads are refused until :meth:`restrict_jobs`.
 
     Notes
     -----
@@ -83,7 +90,8 @@ class PolishingLink:
     """
 
     def __init__(self, host: str, port: int, register_map: RegisterMap, timing: LinkTiming | None = None, *,
-                 command_limits: CommandLimits | None = None, monitor: bool = False) -> None:
+                 command_limits: CommandLimits | None = None, monitor: bool = False,
+                 job_limits: JobLimits | None = None) -> None:
         if not 0 < port <= 65535:
             raise ValueError(f"port must be 1..65535, got {port}")
         self._map = register_map
@@ -101,6 +109,8 @@ class PolishingLink:
         self._sent_commands: dict[int, tuple[int, ...]] = {}
         self._limits = command_limits
         self._ledger = CommandLedger()
+        self._jobs = JobLedger()
+        self._job_limits = job_limits
 
     # ----------------------------------------------------------------------------- public API
     @property
