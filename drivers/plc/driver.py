@@ -30,7 +30,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Sequence
 from types import TracebackType
 
 import numpy as np
@@ -42,7 +41,8 @@ from wavestack.drivers.plc.gate import (HeartbeatEchoStale, PlcNotReady, command
                                        echo_lag_error, no_scan_since, not_ready)
 from wavestack.drivers.plc.job_control import JobControl
 from wavestack.drivers.plc.jobs import JobLedger, JobLimits
-from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused, registers_fit
+from wavestack.drivers.plc.raw_access import RawAccess
+from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap
 from wavestack.drivers.plc.status import (
     CommandAck,
     MachineOutputs,
@@ -61,10 +61,11 @@ _log = logging.getLogger(__name__)
 _WATCHDOG_EXCEPTION = 4
 
 
-class PolishingLink(JobControl):
+class PolishingLink(JobControl, RawAccess):
     """Modbus/TCP link to the polishing-station PLC.
 
-    Commands publish the measured terms for the machine's display; removal happens only through jobs (:mod:`.job_control`).
+    Commands publish the measured terms for the machine's display; removal happens only through
+    jobs (:mod:`.job_control`). Raw register access for commissioning: :mod:`.raw_access`.
 
     Parameters
     ----------
@@ -319,30 +320,6 @@ class PolishingLink(JobControl):
                 self._send_heartbeat(deadline)
             return self._read_status(deadline)
 
-    def read_registers(self, address: int, count: int, timeout_s: float) -> list[int]:
-        """Raw read of ``count`` registers with the configured read function code (diagnostics)."""
-        deadline = deadline_after(timeout_s)
-        with self._lock:
-            self._transport.ensure_connected(deadline)
-            return self._transport.read(address, count, self._map.status.read_function, deadline)
-
-    def write_registers(self, address: int, values: Sequence[int], timeout_s: float) -> None:
-        """Raw write inside the heartbeat or re-arm register (commissioning); WriteRefused elsewhere, before the wire.
-
-        The command block is refused too: a removal goes through :meth:`send_removal`, its gate and limits.
-        """
-        values = list(values)
-        if not values or not registers_fit(values):
-            raise ValueError(f"{self._device}: values must be 1..123 integers 0..65535, got {values!r}")
-        block = self._map.check_write(address, len(values), self._write_function_for(address))
-        if block.name == "command":
-            raise WriteRefused(self._device, f"refusing a raw write to register {address}: the command block is "
-                               "written only by send_removal (the readiness gate and the command limits)")
-        deadline = deadline_after(timeout_s)
-        with self._lock:
-            self._transport.ensure_connected(deadline)
-            self._write(address, values, block.write_function or 16, deadline)
-
     def close(self) -> None:
         """Close the connection; idempotent. A later call reconnects."""
         with self._lock:
@@ -357,12 +334,6 @@ class PolishingLink(JobControl):
         self.close()
 
     # ----------------------------------------------------------------------------- internals
-    def _write_function_for(self, address: int) -> int:
-        for block in self._map.blocks():
-            if block.writable and block.contains(address):
-                return block.write_function or 16
-        return 16
-
     def _echo_lag_error(self, status: PlcStatus) -> HeartbeatEchoStale | None:
         return echo_lag_error(self._device, self._beat, status, self._timing.heartbeat_echo_max_lag,
                               self._map.status.start + 2)

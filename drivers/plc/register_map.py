@@ -277,7 +277,7 @@ class RegisterMap:
             command=RegisterBlock("command", command_block[0], command_block[1],
                                   f"uint16 command id, uint16 passes, {terms} removal_nm", read_function,
                                   block_write_function, command_word_order or word_order,
-                                  "takes effect once when the id changes; written in one request"),
+                                  "measured terms for the display (removal only through jobs); once per id; one request"),
             output=RegisterBlock("output", output_block[0], output_block[1],
                                  f"uint16 spindle enable, uint16 active id, {terms} set point nm", read_function,
                                  None, output_word_order or word_order, "machine outputs; the watchdog zeroes them"),
@@ -290,7 +290,7 @@ class RegisterMap:
                 "machine", machine_register, MACHINE_BLOCK_COUNT,
                 "uint16 state, uint16 reason, uint16 job id, uint32 points done, uint32 point count",
                 read_function, None, word_order,
-                "state 0 idle, 1 loaded, 2 running, 3 done, 4 aborted, 5 fault; reason code (README)"),
+                "state 0 idle, 1 loaded, 2 running, 3 done, 4 aborted, 5 fault; reason code (docs/instruments.md)"),
         )
 
     @property

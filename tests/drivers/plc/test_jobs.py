@@ -178,3 +178,12 @@ def test_a_bad_job_is_refused_naming_the_field(changes: dict[str, object], messa
     values.update(changes)
     with pytest.raises(ValueError, match=message):
         JobFile(**values)  # type: ignore[arg-type]
+
+
+def test_a_raw_write_into_the_job_block_is_refused_before_the_wire() -> None:
+    from wavestack.drivers.plc import PolishingLink
+
+    link = PolishingLink("127.0.0.1", 9, build())  # nothing listens there: a refusal must come first
+    with pytest.raises(WriteRefused, match="job block is written only by"):
+        link.write_registers(300, [1, 1, 0, 0, 0, 1, 0, 0], timeout_s=0.5)
+    assert not link.connected
