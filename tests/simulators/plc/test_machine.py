@@ -178,3 +178,26 @@ def test_an_abort_of_a_loaded_job_spends_it_without_polishing(tmp_path: Path) ->
     assert (snapshot.state, snapshot.reason, snapshot.points_done) == (JobState.ABORTED, StopReason.HOST_ABORT, 0)
     assert m.start(3) and target.total_nm == 0  # a start after the abort reports the end, runs nothing
     assert m.wait_idle(0.0)  # no thread was started
+
+
+@fuzz_settings(200)
+@given(writes=st.lists(st.lists(st.integers(0, 0xFFFF), min_size=8, max_size=8), min_size=1, max_size=6))
+def test_any_job_block_write_is_answered_and_never_raises(tmp_path_factory: pytest.TempPathFactory,
+                                                          writes: list[list[int]]) -> None:
+    from wavestack.simulators.plc import PlcSimLayout, PolishingPlcProgram, PolishingStation, SimFaults
+
+    folder = tmp_path_factory.mktemp("jobs")
+    (folder / "job-00003.wsjob").write_bytes(job_bytes(3))
+    layout = PlcSimLayout(unit_id=1, self_check_register=0, self_check_value=12345.678, self_check_word_order="ABCD",
+                          heartbeat_register=10, rearm_register=11, status_register=20, command_block=(100, 4),
+                          output_block=(200, 4), command_word_order="ABCD", output_word_order="ABCD",
+                          watchdog_timeout_s=60.0, job_register=300, machine_register=320)
+    m = machine(folder)
+    program = PolishingPlcProgram(layout, PolishingStation((0.0,)), SimFaults(), m)
+    memory = [0] * 400
+    assert program.on_request(10, [1], 0.0, 0, memory) is None  # a heartbeat: the watchdog runs
+    for registers in writes:
+        answer = program.on_request(300, registers, 0.1, 0, memory)
+        assert answer is None or int(answer) in (3, 4, 6)
+        assert 0 <= memory[320] <= 5 and 0 <= memory[321] <= 18  # the machine block holds a known state and reason
+    m.close()
