@@ -126,6 +126,22 @@ def _finite(value: object) -> bool:
     return isinstance(value, float) and math.isfinite(value)
 
 
+def _table(name: str, rows: list) -> NDArray[np.float64]:
+    """The points as a (K, 4) array; fast path by numpy, the slow path only to name the first bad point."""
+    try:
+        kinds = {type(v) for row in rows for v in row} if all(type(row) is list for row in rows) else {None}
+        table = np.array(rows, dtype=np.float64) if kinds <= {int, float} else None
+    except (TypeError, ValueError, OverflowError):
+        table = None
+    if table is not None and table.shape == (len(rows), 4) and bool(np.all(np.isfinite(table))):
+        return table
+    for index, row in enumerate(rows):
+        if not (isinstance(row, list) and len(row) == 4 and all(_finite(v) for v in row)):
+            raise JobFileRefused(StopReason.FILE_CORRUPT, f"{name}: point {index} must be 4 finite numbers, "
+                                 f"got {row!r:.60}")
+    raise JobFileRefused(StopReason.FILE_CORRUPT, f"{name}: the points are not a table of 4 finite numbers per row")
+
+
 def _integer(document: dict, key: str, name: str) -> int:
     value = document.get(key)
     if isinstance(value, bool) or not isinstance(value, int):
@@ -150,11 +166,7 @@ def _parse(name: str, document: object, crc: int) -> MachineJob:
         raise JobFileRefused(StopReason.FILE_CORRUPT, f"{name}: points must be a non-empty list")
     if len(rows) != count:
         raise JobFileRefused(StopReason.COUNT_MISMATCH, f"{name}: {len(rows)} points, the header says {count}")
-    for index, row in enumerate(rows):
-        if not (isinstance(row, list) and len(row) == 4 and all(_finite(v) for v in row)):
-            raise JobFileRefused(StopReason.FILE_CORRUPT, f"{name}: point {index} must be 4 finite numbers, "
-                                 f"got {row!r:.60}")
-    table = np.array(rows, dtype=np.float64).reshape(count, 4)
+    table = _table(name, rows)
     table.setflags(write=False)
     return MachineJob(job_id=job_id, crc32=crc, total_dwell_s=float(total), x_mm=table[:, 0], y_mm=table[:, 1],
                       dwell_s=table[:, 2], feed_mm_s=table[:, 3])
