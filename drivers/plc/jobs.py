@@ -77,6 +77,7 @@ class JobReason(enum.IntEnum):
     WATCHDOG = 16  #: the heartbeat watchdog tripped during the run
     PLC_RESTART = 17  #: the PLC restarted during the run
     HOST_ABORT = 18  #: the host asked for an abort
+    MACHINE_FAULT = 19  #: the machine itself failed during the run (its log says how)
 
     @property
     def meaning(self) -> str:
@@ -104,6 +105,7 @@ _MEANINGS = {
     JobReason.WATCHDOG: "heartbeat watchdog trip during the run",
     JobReason.PLC_RESTART: "PLC restart during the run",
     JobReason.HOST_ABORT: "aborted by the host",
+    JobReason.MACHINE_FAULT: "the machine failed during the run (see its log)",
 }
 
 

@@ -58,6 +58,7 @@ class StopReason(enum.IntEnum):
     WATCHDOG = 16
     PLC_RESTART = 17
     HOST_ABORT = 18
+    MACHINE_FAULT = 19
 
 
 class JobEvent(enum.Enum):

@@ -254,7 +254,7 @@ class PolishingMachine:
             self._halt_reason = StopReason.NONE
             run = self._run
             self._executed[job_id] = run.executed_s
-            self._thread = threading.Thread(target=self._polish, args=(run,), name=f"polishing-job-{job_id}",
+            self._thread = threading.Thread(target=self._polish_safely, args=(run,), name=f"polishing-job-{job_id}",
                                             daemon=True)
             self._thread.start()
             return True
@@ -313,6 +313,16 @@ class PolishingMachine:
         for ok, reason, message in checks:
             if not ok:
                 raise JobFileRefused(reason, f"job {job_id}: {message}")
+
+    def _polish_safely(self, run: _Run) -> None:
+        """The job thread: :meth:`_polish`; anything that escapes it ends the job ABORTED (MACHINE_FAULT)."""
+        try:
+            self._polish(run)
+        except Exception:
+            _log.exception("machine: job %d failed; it ends ABORTED (MACHINE_FAULT)", run.job.job_id)
+            with self._lock:
+                if self._state is JobState.RUNNING:
+                    self._enter(JobEvent.STOP, StopReason.MACHINE_FAULT)
 
     def _polish(self, run: _Run) -> None:
         """The job thread: travel and dwell point by point, chunks applied as it goes."""

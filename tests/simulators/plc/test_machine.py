@@ -167,6 +167,24 @@ def test_the_tool_errors_scale_the_removed_volume(tmp_path: Path, width_error: f
     assert target.total_nm == pytest.approx(nominal * (1 + width_error) ** 2 * (1 + rate_error), rel=5e-4)
 
 
+class BrokenTarget(SumTarget):
+    def apply_removal(self, removal_nm: np.ndarray) -> None:
+        raise OSError("the optic's surface store failed")
+
+
+def test_a_machine_that_fails_mid_run_ends_aborted_not_running(tmp_path: Path,
+                                                               caplog: pytest.LogCaptureFixture) -> None:
+    data = job_bytes(3)
+    (tmp_path / "job-00003.wsjob").write_bytes(data)
+    m = machine(tmp_path, BrokenTarget())
+    m.load(3, zlib.crc32(data[:data.rindex(b"\nwsjob")]), 2, 3.0)
+    m.start(3)
+    assert m.wait_idle(10.0)
+    snapshot = m.snapshot()
+    assert (snapshot.state, snapshot.reason) == (JobState.ABORTED, StopReason.MACHINE_FAULT)
+    assert "surface store failed" in caplog.text
+
+
 def test_an_abort_of_a_loaded_job_spends_it_without_polishing(tmp_path: Path) -> None:
     data = job_bytes(3)
     (tmp_path / "job-00003.wsjob").write_bytes(data)
@@ -199,5 +217,5 @@ def test_any_job_block_write_is_answered_and_never_raises(tmp_path_factory: pyte
     for registers in writes:
         answer = program.on_request(300, registers, 0.1, 0, memory)
         assert answer is None or int(answer) in (3, 4, 6)
-        assert 0 <= memory[320] <= 5 and 0 <= memory[321] <= 18  # the machine block holds a known state and reason
+        assert 0 <= memory[320] <= 5 and 0 <= memory[321] <= 19  # the machine block holds a known state and reason
     m.close()
