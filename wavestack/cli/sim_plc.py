@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ipaddress
 import logging
+import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -79,8 +80,9 @@ def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remo
     except OSError as error:
         raise ValueError(f"cannot serve the PLC simulator on {host}:{port}: {error}") from None
     try:
-        where = f" (machine on job folder {machine.settings.job_folder})" if machine is not None else ""
-        announce(f"listening {host}:{simulator.port}{where}")
+        if machine is not None:  # on stderr: the announced line stays exactly 'listening HOST:PORT' for scripts
+            print(f"wavestack sim plc: polishing machine on job folder {machine.settings.job_folder}", file=sys.stderr)
+        announce(f"listening {host}:{simulator.port}")
         while not stop.wait(0.1):
             pass
     finally:
