@@ -170,7 +170,7 @@ def _prepare(
     distance = distance_transform_edt(~grid_p)
     weight = np.cos(0.5 * np.pi * np.minimum(distance / fade_px, 1.0)) ** 2
     if extension == "smooth":
-        extended = extend_surface(surface_p, mask_p, np.ones(shape, bool), decay_px=max(radius / 2, 1.0))
+        extended = extend_surface(surface_p, mask_p, np.ones(shape, bool), decay_px=max(float(radius), 1.0))
         target = extended * weight
     else:
         target = np.where(mask_p, surface_p, 0.0)

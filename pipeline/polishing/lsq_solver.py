@@ -13,6 +13,15 @@ a uniform layer: that costs dwell, not figure), ``c`` the median column norm of 
 damping is dimensionless). ``scipy.optimize.lsq_linear`` solves it (trust-region reflective,
 ``'trf'``, with LSMR on the sparse matrix). Any point set works (a raster, a spiral, a sparse
 subset, an odd-shaped aperture), where the FFT solver needs the full pixel grid.
+
+Start point. ``lsq_linear`` starts from the unbounded solution folded into the bounds; for a
+deconvolution that solution oscillates wildly, the fold leaves most dwell at the bound, and the
+trust-region iterations then crawl (10 % of the error left after 50 iterations on a test where
+the exact dwell is known). So the solve starts instead from an early-stopped unbounded LSMR
+solution (early stopping regularises), raised by its most negative dwell and clipped to
+``max_dwell_s``: raising every point's dwell alike removes a near-uniform layer in the clear
+aperture, which the piston absorbs (the observation behind RIFTA's piston step). ``lsq_linear``
+takes no start point, so it solves for the change from this start, bounds shifted to match.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import sparse
 from scipy.optimize import lsq_linear
+from scipy.sparse.linalg import lsmr
 
 from .._checks import int_at_least, real_at_least
 from ._inputs import surface_in_aperture
@@ -46,6 +56,7 @@ def solve_dwell_lsq(
     damping: float = 0.0,
     max_iter: int = 50,
     lsmr_maxiter: int = 20,
+    start_iter: int = 200,
     tol: float = 1e-6,
     max_nonzeros: int = DEFAULT_MAX_NONZEROS,
 ) -> DwellSolution:
@@ -73,6 +84,8 @@ def solve_dwell_lsq(
     lsmr_maxiter : int, optional
         LSMR iterations per trust-region step (default 20): each step needs only a rough
         direction, and an uncapped LSMR makes the cost grow with the point count.
+    start_iter : int, optional
+        LSMR iterations of the unbounded start (default 200; see the module docstring).
     tol : float, optional
         Its relative tolerance on the cost (default 1e-6).
     max_nonzeros : int, optional
@@ -88,7 +101,7 @@ def solve_dwell_lsq(
     ------
     ValueError
         Naming ``surface_nm``, ``clear_aperture``, ``points_px``, ``max_dwell_s``, ``damping``,
-        ``max_iter``, ``lsmr_maxiter``, ``tol`` or ``max_nonzeros``.
+        ``max_iter``, ``lsmr_maxiter``, ``start_iter``, ``tol`` or ``max_nonzeros``.
 
     Examples
     --------
@@ -107,6 +120,7 @@ def solve_dwell_lsq(
     damp = real_at_least(damping, "damping", 0.0)
     iterations = int_at_least(max_iter, "max_iter", 1)
     inner = int_at_least(lsmr_maxiter, "lsmr_maxiter", 1)
+    start_iter = int_at_least(start_iter, "start_iter", 1)
     tolerance = real_at_least(tol, "tol", 0.0, strict=True)
     budget = int_at_least(max_nonzeros, "max_nonzeros", 1)
     grid = dwell_grid(mask, tif)
@@ -119,9 +133,11 @@ def solve_dwell_lsq(
     system, rhs, scale = _system(matrix, target, damp)
     lower_bounds = np.r_[np.zeros(used.shape[0]), -np.inf]
     upper_bounds = np.r_[np.full(used.shape[0], upper), np.inf]
-    fitted = lsq_linear(system, rhs, bounds=(lower_bounds, upper_bounds), method="trf", lsq_solver="lsmr",
-                        tol=tolerance, max_iter=iterations, lsmr_tol="auto", lsmr_maxiter=inner)
-    dwell_at = np.clip(fitted.x[:-1], 0.0, upper)
+    start = _feasible_start(system, rhs, matrix.shape[0], upper, start_iter)
+    fitted = lsq_linear(system, rhs - system @ start, bounds=(lower_bounds - start, upper_bounds - start), method="trf",
+                        lsq_solver="lsmr", tol=tolerance, max_iter=iterations, lsmr_tol="auto", lsmr_maxiter=inner)
+    solved = start + fitted.x
+    dwell_at = np.clip(solved[:-1], 0.0, upper)
     dwell = np.zeros(surface.shape)
     dwell[used[:, 0], used[:, 1]] = dwell_at
     diagnostics = {
@@ -129,7 +145,7 @@ def solve_dwell_lsq(
         "points_used": int(used.shape[0]),
         "points_outside_grid": int(points.shape[0] - used.shape[0]),
         "nonzeros": int(matrix.nnz),
-        "piston_nm": float(fitted.x[-1]),
+        "piston_nm": float(solved[-1]),
         "at_max_dwell": int(np.count_nonzero(dwell_at >= upper)) if np.isfinite(upper) else 0,
         "iterations": int(fitted.nit),
         "status": int(fitted.status),
@@ -139,6 +155,21 @@ def solve_dwell_lsq(
         "max_dwell_s": None if max_dwell_s is None else upper,
     }
     return make_solution(surface, mask, grid, dwell, tif, "lsq", diagnostics)
+
+
+def _feasible_start(
+    system: sparse.csr_array, rhs: NDArray[np.float64], pixels: int, upper: float, iterations: int
+) -> NDArray[np.float64]:
+    """An early-stopped unbounded LSMR solution, dwell raised to >= 0 and clipped to ``upper``.
+
+    The piston (last entry) is then the one that zeroes the mean misfit over the ``pixels``
+    clear-aperture rows (the damping rows, if any, follow them).
+    """
+    free = lsmr(system, rhs, maxiter=iterations)[0]
+    dwell = np.minimum(free[:-1] - min(float(free[:-1].min()), 0.0), upper)
+    start = np.r_[dwell, 0.0]
+    start[-1] = float(np.mean((system @ start - rhs)[:pixels]))
+    return start
 
 
 def _points(points_px: ArrayLike | None, grid: NDArray[np.bool_]) -> NDArray[np.intp]:
