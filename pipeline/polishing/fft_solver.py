@@ -34,7 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import fft
 from scipy.ndimage import distance_transform_edt
 
-from .._checks import int_at_least, one_of
+from .._checks import int_at_least, one_of, real_at_least
 from ._inputs import surface_in_aperture
 from .extension import dwell_grid, extend_surface
 from .solution import DwellSolution, make_solution
@@ -48,7 +48,7 @@ gain of 1e6, a cut-off near 0.85/sigma cycles per pixel for a Gaussian) to a str
 (half the DC gain)."""
 _SCAN_POINTS = 16
 _BISECTIONS = 5
-DEFAULT_RMS_TOLERANCE = 0.02
+DEFAULT_RMS_TOLERANCE = 0.1
 """Default slack on the residual RMS, as a fraction of the input RMS (see :func:`solve_dwell_fft`)."""
 
 
@@ -72,6 +72,7 @@ def solve_dwell_fft(
     extension: Literal["smooth", "zero"] = "smooth",
     threshold: float | None = None,
     rms_tolerance: float = DEFAULT_RMS_TOLERANCE,
+    max_total_dwell_s: float | None = None,
 ) -> DwellSolution:
     """Non-negative dwell on the dwell grid from the RIFTA-style thresholded inverse filter.
 
@@ -94,25 +95,32 @@ def solve_dwell_fft(
     rms_tolerance : float, optional
         How the threshold is chosen: the largest one (the gentlest filter) whose predicted
         residual RMS is within ``rms_tolerance`` x the input RMS of the least RMS found
-        (default 0.02). The least RMS alone is no criterion on exact data: plain inversion of
-        an exact surface leaves a zero residual with an unbounded, wildly oscillating dwell
-        (and so a huge piston and total dwell, and a removal that model errors of the real tool
-        spoil). Accepting 2 % of the input RMS more residual than the best picks a filter that
-        stays far from that, which is the aim of RIFTA's total-dwell criterion. 0 gives the
-        least-RMS threshold.
+        (default 0.1). The least RMS alone is no criterion: on exact data plain inversion leaves
+        a zero residual with an unbounded, wildly oscillating dwell, and on a measured map it
+        chases pixel-scale detail the tool barely touches, at the price of a piston (and a
+        total dwell) that grows without end and a removal that the real tool's model errors
+        spoil. That is the concern of RIFTA's total-dwell criterion. On the benchmark surface
+        (50 nm RMS with a Zygo map's mid-spatial content, 15 px TIF) a slack of 10 % of the
+        input leaves ~5 nm for ~1e6 s of dwell where 2 % leaves ~1 nm for ~2e7 s; the loop
+        re-measures after each run, and 10 % is well beyond the 3x per run it needs. 0 gives
+        the least-RMS threshold.
+    max_total_dwell_s : float, optional
+        A dwell budget (s), e.g. the machine's job limit: only thresholds whose total dwell
+        fits are considered, and outer iterations stop before exceeding it. When none fits,
+        the gentlest threshold is used and ``dwell_budget_met`` is False in the diagnostics.
 
     Returns
     -------
     DwellSolution
         ``solver="fft"``; diagnostics: threshold, gamma, extension, iterations_run,
         rms_per_iteration_nm, piston_dwell_s (uniform dwell added so that min dwell = 0),
-        evaluations, grid_pixels.
+        evaluations, max_total_dwell_s, dwell_budget_met, grid_pixels.
 
     Raises
     ------
     ValueError
         Naming ``surface_nm`` or ``clear_aperture`` (shape, NaN inside, empty), ``iterations``,
-        ``extension`` or ``threshold``.
+        ``extension``, ``threshold``, ``rms_tolerance`` or ``max_total_dwell_s``.
 
     Examples
     --------
@@ -123,7 +131,7 @@ def solve_dwell_fft(
     >>> aperture = rows**2 + cols**2 < 20**2
     >>> surface = np.where(aperture, 30.0 * (rows**2 + cols**2) / 400.0 + 5.0 * cols / 20.0, np.nan)
     >>> solution = solve_dwell_fft(surface, aperture, tif)
-    >>> bool(solution.dwell_s.min() >= 0), bool(solution.rms_nm < 0.05 * np.nanstd(surface))
+    >>> bool(solution.dwell_s.min() >= 0), bool(solution.rms_nm < 0.2 * np.nanstd(surface))
     (True, True)
     """
     surface, mask = surface_in_aperture(surface_nm, clear_aperture)
@@ -137,8 +145,13 @@ def solve_dwell_fft(
     if not (isinstance(rms_tolerance, float | int) and 0 <= rms_tolerance < 1):
         raise ValueError(f"rms_tolerance: expected a fraction of the input RMS in [0, 1), got {rms_tolerance!r}")
     slack = float(rms_tolerance) * float(np.std(surface[mask]))
-    chosen = float(threshold) if threshold is not None else _best_threshold(evaluate, slack)
-    dwell, history = _iterate(problem, evaluate, chosen, outer)
+    budget = np.inf if max_total_dwell_s is None else real_at_least(max_total_dwell_s, "max_total_dwell_s", 0.0, strict=True)
+    within = True
+    if threshold is None:
+        chosen, within = _best_threshold(evaluate, slack, budget)
+    else:
+        chosen = float(threshold)
+    dwell, history = _iterate(problem, evaluate, chosen, outer, budget if within else np.inf)
     piston = -float(dwell[problem.grid].min())
     dwell = np.where(problem.grid, dwell + piston, 0.0)
     pad = tif.radius_px
@@ -150,6 +163,8 @@ def solve_dwell_fft(
         "rms_per_iteration_nm": tuple(history),
         "piston_dwell_s": piston,
         "evaluations": evaluate.count,
+        "max_total_dwell_s": None if max_total_dwell_s is None else budget,
+        "dwell_budget_met": within,
         "grid_pixels": int(grid.sum()),
     }
     cropped = dwell[pad : pad + surface.shape[0], pad : pad + surface.shape[1]]
@@ -182,7 +197,7 @@ def _prepare(
 
 
 class _Evaluator:
-    """Residual RMS in the clear aperture of a dwell map, counting the evaluations."""
+    """Residual RMS in the clear aperture and total dwell of a dwell map, counting evaluations."""
 
     def __init__(self, problem: _Problem) -> None:
         self.problem = problem
@@ -203,48 +218,57 @@ class _Evaluator:
         """Removal of ``dwell`` (nm); circular here, which is exact: the grid is a radius from the wrap."""
         return fft.irfft2(fft.rfft2(dwell) * self.problem.spectrum, s=dwell.shape)
 
-    def rms(self, dwell: NDArray[np.float64]) -> float:
+    def assess(self, dwell: NDArray[np.float64]) -> tuple[float, float]:
+        """Residual RMS (nm) in the clear aperture, and total dwell (s) once raised to min 0."""
         self.count += 1
         left = (self.problem.target - self.removal(dwell))[self.problem.aperture]
-        return float(np.std(left))
+        on_grid = dwell[self.problem.grid]
+        return float(np.std(left)), float(np.sum(on_grid - on_grid.min()))
 
-    def rms_at(self, log_threshold: float) -> float:
-        return self.rms(self.inverse(self.target_spectrum, 10.0**log_threshold))
+    def assess_at(self, log_threshold: float) -> tuple[float, float]:
+        return self.assess(self.inverse(self.target_spectrum, 10.0**log_threshold))
 
 
-def _best_threshold(evaluate: _Evaluator, tolerance_nm: float) -> float:
-    """The largest threshold whose residual RMS is within ``tolerance_nm`` of the least one.
+def _best_threshold(evaluate: _Evaluator, tolerance_nm: float, budget_s: float) -> tuple[float, bool]:
+    """The threshold, and whether its dwell fits ``budget_s``.
 
-    A scan of log10(threshold) finds the least RMS; then, from the largest scanned threshold
-    within the tolerance, a bisection towards the next scanned one finds the edge.
+    Among the scanned thresholds whose total dwell fits the budget, the least residual RMS is
+    found; the choice is the largest threshold within ``tolerance_nm`` of it, refined by bisection
+    towards the next scanned one. When no threshold fits, the gentlest (largest) is returned.
     """
     low, high = LOG_THRESHOLD_RANGE
     scan = np.linspace(low, high, _SCAN_POINTS)
-    values = np.array([evaluate.rms_at(x) for x in scan])
-    bound = values.min() + tolerance_nm
-    good = int(np.nonzero(values <= bound)[0].max())
+    rms, total = np.array([evaluate.assess_at(x) for x in scan]).T
+    fits = total <= budget_s
+    if not fits.any():
+        logger.warning("no FFT filter threshold keeps the total dwell within %.4g s (least %.4g s)", budget_s, total.min())
+        return 10.0**high, False
+    bound = rms[fits].min() + tolerance_nm
+    good = int(np.nonzero(fits & (rms <= bound))[0].max())
     inside = float(scan[good])
     if good + 1 < scan.size:
         outside = float(scan[good + 1])
         for _ in range(_BISECTIONS):
             middle = 0.5 * (inside + outside)
-            if evaluate.rms_at(middle) <= bound:
+            if evaluate.assess_at(middle)[0] <= bound:
                 inside = middle
             else:
                 outside = middle
-    logger.debug("FFT dwell threshold 1e%.2f (least residual %.3g nm, bound %.3g nm)", inside, values.min(), bound)
-    return 10.0**inside
+    logger.debug("FFT dwell threshold 1e%.2f (least residual %.3g nm, bound %.3g nm)", inside, rms[fits].min(), bound)
+    return 10.0**inside, True
 
 
-def _iterate(problem: _Problem, evaluate: _Evaluator, threshold: float, outer: int) -> tuple[NDArray[np.float64], list[float]]:
-    """Filter the target, then filter and add the remaining residual while the RMS falls."""
+def _iterate(
+    problem: _Problem, evaluate: _Evaluator, threshold: float, outer: int, budget_s: float
+) -> tuple[NDArray[np.float64], list[float]]:
+    """Filter the target, then filter and add the remaining residual while the RMS falls (within budget)."""
     dwell = evaluate.inverse(evaluate.target_spectrum, threshold)
-    history = [evaluate.rms(dwell)]
+    history = [evaluate.assess(dwell)[0]]
     for _ in range(outer - 1):
         left = (problem.target - evaluate.removal(dwell)) * problem.weight
         trial = dwell + evaluate.inverse(fft.rfft2(left), threshold)
-        rms = evaluate.rms(trial)
-        if rms >= history[-1]:
+        rms, total = evaluate.assess(trial)
+        if rms >= history[-1] or total > budget_s:
             break
         dwell, history = trial, [*history, rms]
     return dwell, history

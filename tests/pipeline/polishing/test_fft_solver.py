@@ -45,9 +45,9 @@ def test_a_surface_made_by_a_known_dwell_is_recovered() -> None:
     # gain (1e-16 x 1e6) and the frequencies below the threshold stay: 1e-6 of the input RMS is
     # 10^4 x above what the filter leaves and 10^4 x below any figure error that matters.
     assert solution.rms_nm < 1e-6 * np.nanstd(surface)
-    # The default slack (2 % of the input RMS) is what the default gives away at most.
+    # The default slack (10 % of the input RMS) is what the default gives away at most.
     default = solve_dwell_fft(surface, aperture, TIF)
-    assert solution.rms_nm <= default.rms_nm <= solution.rms_nm + 0.02 * np.nanstd(surface) + 1e-12
+    assert solution.rms_nm <= default.rms_nm <= solution.rms_nm + 0.1 * np.nanstd(surface) + 1e-12
     assert default.total_dwell_s < solution.total_dwell_s  # the gentler filter dwells less
 
 
@@ -65,7 +65,7 @@ def test_dwell_is_non_negative_zero_off_grid_and_lowers_the_rms(seed: int, corr_
     assert np.all(solution.dwell_s[~grid] == 0.0)
     assert solution.dwell_s.min() == 0.0  # the least piston: some point does not dwell at all
     # Smooth surfaces (correlation >= half the TIF FWHM) are within the tool's reach: the residual
-    # must fall well below the input, by at least 2x (the slack alone would allow 98 %).
+    # must fall well below the input, by at least 2x (the slack alone would allow 90 %).
     assert solution.rms_nm < 0.5 * np.nanstd(surface)
     assert solution.total_dwell_s == pytest.approx(solution.dwell_s.sum())
     assert np.allclose(solution.removal_nm, removal_nm(solution.dwell_s, TIF))
@@ -77,6 +77,19 @@ def _edge_and_middle(residual: np.ndarray, radius: float, band_px: float) -> tup
     edge = residual[(rho > radius - band_px) & np.isfinite(residual)]
     middle = residual[rho < radius / 2]
     return float(np.sqrt(np.mean(edge**2))), float(np.sqrt(np.mean(middle**2)))
+
+
+def test_a_dwell_budget_is_kept() -> None:
+    surface = _smooth_surface((48, 48), 16, seed=9, corr_px=3.0, rms_nm=30.0)
+    aperture = np.isfinite(surface)
+    free = solve_dwell_fft(surface, aperture, TIF, rms_tolerance=0.0)
+    budget = 0.2 * free.total_dwell_s
+    held = solve_dwell_fft(surface, aperture, TIF, rms_tolerance=0.0, max_total_dwell_s=budget)
+    assert held.diagnostics["dwell_budget_met"] and held.total_dwell_s <= budget * (1 + 1e-9)
+    assert held.rms_nm >= free.rms_nm  # less dwell cannot buy a better figure here
+    impossible = solve_dwell_fft(surface, aperture, TIF, max_total_dwell_s=1e-6)
+    assert not impossible.diagnostics["dwell_budget_met"]
+    assert impossible.diagnostics["threshold"] == pytest.approx(10**-0.3)  # the gentlest filter
 
 
 def test_the_extension_keeps_the_edge_polished() -> None:
@@ -103,7 +116,7 @@ def test_the_extension_keeps_the_edge_polished() -> None:
     ("change", "named"),
     [("shape", "clear_aperture"), ("nan", "surface_nm"), ("empty", "clear_aperture"),
      ("iterations", "iterations"), ("extension", "extension"), ("threshold", "threshold"),
-     ("tolerance", "rms_tolerance")],
+     ("tolerance", "rms_tolerance"), ("budget", "max_total_dwell_s")],
 )
 def test_bad_inputs_are_refused_by_name(change: str, named: str) -> None:
     surface, aperture = np.zeros((30, 30)), _disc((30, 30), 8)
@@ -120,8 +133,10 @@ def test_bad_inputs_are_refused_by_name(change: str, named: str) -> None:
         kwargs["extension"] = "gerchberg"
     elif change == "threshold":
         kwargs["threshold"] = 1.5
-    else:
+    elif change == "tolerance":
         kwargs["rms_tolerance"] = -0.1
+    else:
+        kwargs["max_total_dwell_s"] = 0.0
     with pytest.raises(ValueError, match=named):
         solve_dwell_fft(surface, aperture, TIF, **kwargs)
 
