@@ -46,7 +46,7 @@ def test_a_surface_made_by_a_known_dwell_on_the_points_is_recovered() -> None:
     solution = solve_dwell_lsq(surface, aperture, TIF, points_px=points)
     # An exact solution exists; the iterative solvers stop early (that is their regularisation,
     # the matrix is a Gaussian deconvolution with a condition number ~1e4), so what is left is
-    # the part of the surface in the TIF's weakest singular directions: measured ~2 % of the
+    # the part of the surface in the TIF's weakest singular directions: measured 2.5 % of the
     # input RMS here. 5 % is a bound with margin that a wrong matrix (a shifted or mis-scaled
     # column) cannot meet: it would leave tens of percent.
     assert solution.rms_nm < 0.05 * np.nanstd(surface)
