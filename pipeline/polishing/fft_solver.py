@@ -139,13 +139,13 @@ def solve_dwell_fft(
     one_of(extension, "extension", ("smooth", "zero"))
     if threshold is not None and not (isinstance(threshold, float | int) and 0 < threshold < 1):
         raise ValueError(f"threshold: expected a fraction of the TIF's DC gain in (0, 1), got {threshold!r}")
-    grid = dwell_grid(mask, tif)
-    problem = _prepare(surface, mask, grid, tif, extension)
-    evaluate = _Evaluator(problem)
     if not (isinstance(rms_tolerance, float | int) and 0 <= rms_tolerance < 1):
         raise ValueError(f"rms_tolerance: expected a fraction of the input RMS in [0, 1), got {rms_tolerance!r}")
     slack = float(rms_tolerance) * float(np.std(surface[mask]))
     budget = np.inf if max_total_dwell_s is None else real_at_least(max_total_dwell_s, "max_total_dwell_s", 0.0, strict=True)
+    grid = dwell_grid(mask, tif)
+    problem = _prepare(surface, mask, grid, tif, extension)
+    evaluate = _Evaluator(problem)
     within = True
     if threshold is None:
         chosen, within = _best_threshold(evaluate, slack, budget)
@@ -157,7 +157,7 @@ def solve_dwell_fft(
     pad = tif.radius_px
     diagnostics = {
         "threshold": chosen,
-        "gamma": 1.0 / (chosen * abs(problem.spectrum[0, 0])),
+        "gamma": float(1.0 / (chosen * abs(problem.spectrum[0, 0]))),
         "extension": extension,
         "iterations_run": len(history),
         "rms_per_iteration_nm": tuple(history),
