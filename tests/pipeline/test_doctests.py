@@ -24,6 +24,18 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.shack_hartmann.lattice_detection",  # detect_lattice
     "wavestack.pipeline.formats.fourd",  # read_4d
     "wavestack.pipeline.formats.measured",  # read_measured_map
+    "wavestack.pipeline.polishing.tif",  # ToolInfluence
+    "wavestack.pipeline.polishing.removal",  # removal_nm
+    "wavestack.pipeline.polishing.extension",  # dwell_grid
+    "wavestack.pipeline.polishing.fft_solver",  # solve_dwell_fft
+    "wavestack.pipeline.polishing.lsq_solver",  # solve_dwell_lsq
+    "wavestack.pipeline.polishing.grid",  # GridFrame
+    "wavestack.pipeline.polishing.limits",  # MachineLimits
+    "wavestack.pipeline.polishing.path",  # PointLattice, raster_order, spiral_order
+    "wavestack.pipeline.polishing.feed",  # feed_profile
+    "wavestack.pipeline.polishing.machine_program",  # MachineProgram
+    "wavestack.pipeline.polishing.program",  # plan_program
+    "wavestack.pipeline.polishing.program_checks",  # check_program
 )
 
 
