@@ -1,0 +1,149 @@
+"""From a trusted measurement to a checked job: dwell, machine program, predicted residual, job file.
+
+:func:`plan_job` is pure computation (no I/O): the configured solver gives the dwell map
+(:func:`~wavestack.pipeline.polishing.solve_dwell_fft`, RIFTA, or the bounded least squares of
+:func:`~wavestack.pipeline.polishing.solve_dwell_lsq`); the machine program is planned from it along
+the configured path and checked against the machine's limits (:func:`plan_program`,
+:func:`check_program`). The prediction is made from what the machine will *execute* -- the
+program's own dwell map, convolved with the host's TIF -- not from the solver's ideal map, so the
+predicted residual is the one the measured residual should be compared with. :func:`job_file_of`
+then makes the self-describing job file value of the program.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from wavestack.config.polishing import PolishingSettings, TifSettings
+from wavestack.drivers.plc import JobFile
+from wavestack.pipeline.polishing import (
+    DwellSolution,
+    GridFrame,
+    MachineLimits,
+    MachineProgram,
+    ToolInfluence,
+    check_program,
+    plan_program,
+    removal_nm,
+    residual_after,
+    solve_dwell_fft,
+    solve_dwell_lsq,
+)
+from wavestack.polish.measurement import Measurement
+
+__all__ = ["PlannedJob", "host_tif", "job_file_of", "machine_limits", "plan_job", "tif_description"]
+
+
+@dataclass(frozen=True, eq=False)
+class PlannedJob:
+    """A job ready to hand off.
+
+    Attributes
+    ----------
+    solution : DwellSolution
+        The solver's answer (its ideal dwell and residual).
+    program : MachineProgram
+        What the machine will execute.
+    dwell_s : ndarray (H, W)
+        The program's dwell map on the grid, s.
+    removal_nm : ndarray (H, W)
+        The host TIF convolved with ``dwell_s``, nm.
+    residual_nm : ndarray (H, W)
+        Predicted surface after the job, nm, NaN outside the aperture, piston removed.
+    predicted_rms_nm, predicted_pv_nm : float
+    solve_s : float
+        Seconds the solver and planner took.
+    """
+
+    solution: DwellSolution
+    program: MachineProgram
+    dwell_s: NDArray[np.float64]
+    removal_nm: NDArray[np.float64]
+    residual_nm: NDArray[np.float64]
+    predicted_rms_nm: float
+    predicted_pv_nm: float
+    solve_s: float
+
+
+def host_tif(settings: TifSettings, pixel_mm: float, base: Path | None = None) -> ToolInfluence:
+    """The host's TIF model from ``[polishing.tif]`` (a ``map`` file relative to ``base``)."""
+    if settings.kind == "gaussian":
+        return ToolInfluence.gaussian(settings.fwhm_mm, settings.peak_rate_nm_s, pixel_mm)
+    assert settings.file is not None  # TifSettings requires it for kind = "map"
+    path = Path(settings.file)
+    if base is not None and not path.is_absolute():
+        path = base / path
+    return ToolInfluence.from_map(np.load(path, allow_pickle=False), pixel_mm)
+
+
+def tif_description(settings: TifSettings) -> dict[str, object]:
+    """The job file's ``tif`` (plain JSON)."""
+    if settings.kind == "gaussian":
+        return {"kind": "gaussian", "fwhm_mm": settings.fwhm_mm, "peak_rate_nm_s": settings.peak_rate_nm_s}
+    return {"kind": "map", "file": settings.file}
+
+
+def machine_limits(settings: PolishingSettings) -> MachineLimits:
+    """The host's machine limits from ``[polishing.machine]`` and ``max_total_dwell_s``."""
+    machine = settings.machine
+    return MachineLimits(max_feed_mm_s=machine.max_feed_mm_s, max_accel_mm_s2=machine.max_accel_mm_s2,
+                         travel_x_mm=machine.travel_x_mm, travel_y_mm=machine.travel_y_mm,
+                         max_dwell_per_point_s=machine.max_dwell_per_point_s,
+                         max_total_dwell_s=settings.max_total_dwell_s)
+
+
+def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSettings, *,
+             solver: str | None = None) -> PlannedJob:
+    """Solve, plan and check one job for ``measurement`` (module notes).
+
+    Parameters
+    ----------
+    measurement : Measurement
+    tif : ToolInfluence
+        The host's model.
+    settings : PolishingSettings
+    solver : {"fft", "lsq"}, optional
+        Overrides ``settings.solver``.
+
+    Raises
+    ------
+    ProgramRejected
+        The program cannot be made to fit the machine's limits.
+    """
+    tick = time.perf_counter()
+    surface, mask = measurement.surface_nm, measurement.mask
+    kind = solver or settings.solver
+    if kind == "fft":
+        solution = solve_dwell_fft(surface, mask, tif)
+    elif kind == "lsq":
+        solution = solve_dwell_lsq(surface, mask, tif, points_px=None,
+                                   max_dwell_s=settings.machine.max_dwell_per_point_s)
+    else:
+        raise ValueError(f"solver: expected 'fft' or 'lsq', got {kind!r}")
+    frame = GridFrame(shape=mask.shape, pixel_mm=settings.pixel_mm)
+    limits = machine_limits(settings)
+    program = plan_program(solution.dwell_s, frame, limits, path=settings.machine.path,
+                           step_px=settings.machine.step_px)
+    check_program(program, limits)
+    executed = np.asarray(program.dwell_map(frame), dtype=np.float64)
+    removal = np.asarray(removal_nm(executed, tif), dtype=np.float64)
+    residual, rms, pv = residual_after(surface, mask, removal)
+    return PlannedJob(solution, program, executed, removal, np.asarray(residual, dtype=np.float64), float(rms),
+                      float(pv), time.perf_counter() - tick)
+
+
+def job_file_of(job: PlannedJob, job_id: int, tif: TifSettings, aperture: dict[str, object],
+                pixel_mm: float) -> JobFile:
+    """The job file value of a planned job (the driver writes it)."""
+    program = job.program
+    return JobFile(job_id=job_id, x_mm=np.asarray(program.x_mm, dtype=np.float64),
+                   y_mm=np.asarray(program.y_mm, dtype=np.float64), dwell_s=np.asarray(program.dwell_s, np.float64),
+                   feed_mm_s=np.asarray(program.feed_mm_s, dtype=np.float64), pixel_mm=pixel_mm,
+                   tif=tif_description(tif), aperture=dict(aperture),
+                   created_utc=datetime.now(timezone.utc).isoformat())
