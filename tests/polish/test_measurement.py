@@ -127,3 +127,15 @@ def test_aperture_key_tells_masks_apart() -> None:
     assert ApertureKey.of(a) == ApertureKey.of(_disc(20.0))
     assert ApertureKey.of(a) != ApertureKey.of(b)
     assert ApertureKey.of(a).to_json()["pixels"] == int(a.sum())
+
+
+def test_the_rim_is_taken_off_before_anything_else() -> None:
+    mask = _disc()
+    waves = np.where(mask, 0.0, np.nan)
+    rim = mask & ~np.roll(mask, 1, axis=0)  # the top rim pixels
+    waves[rim] = 3.0  # a rim of wild phase, as a low-modulation edge gives
+    plain = average_surface([_sample(waves, mask)] * 2, wavelength_nm=600.0, reflection_factor=2.0, min_count=2)
+    cut = average_surface([_sample(waves, mask)] * 2, wavelength_nm=600.0, reflection_factor=2.0, min_count=2,
+                          edge_px=1)
+    assert plain.rms_nm > 10.0 and cut.rms_nm < 1e-9
+    assert cut.aperture.pixels < plain.aperture.pixels and not np.any(cut.mask & rim)

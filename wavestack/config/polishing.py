@@ -101,6 +101,8 @@ class PolishingSettings:
     done_timeout_s: float = setting(600.0, minimum=1.0, maximum=1e6,
                                     doc="longest wait for the machine's done, wall-clock s")
     pixel_mm: float = setting(0.25, minimum=1e-4, maximum=100.0, doc="camera pixel size on the optic, mm")
+    edge_px: int = setting(2, minimum=0, maximum=64,
+                           doc="pixels taken off the measured aperture's rim (its phase is the noisiest)")
     reflection_factor: float = setting(2.0, minimum=0.1, maximum=10.0,
                                        doc="wavefront per surface (2: reflection at normal incidence)")
     target_figure: str | None = setting(None, doc="a .npy map of the target surface, nm, subtracted (else PTT only)")

@@ -185,7 +185,7 @@ class PolishingLoop:
         return average_surface(samples, wavelength_nm=self._config.station.station.wavelength_nm,
                                reflection_factor=s.reflection_factor, min_count=s.averaged_results,
                                reference=c.reference, target_nm=self._target, not_before_ns=c.not_before_ns,
-                               max_noise_rms_nm=s.max_noise_rms_nm)
+                               max_noise_rms_nm=s.max_noise_rms_nm, edge_px=s.edge_px)
 
     def _measure(self, c: _Campaign) -> tuple[LoopEvent, str]:
         try:

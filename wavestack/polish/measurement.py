@@ -8,7 +8,10 @@ above its limit.
 
 Units: a map in waves of wavefront becomes nm of surface as ``waves * wavelength_nm /
 reflection_factor`` (2 for a surface seen in reflection at normal incidence, one pass). Each map
-then has the configured target figure subtracted (if any) and piston, tip and tilt removed by a
+is cut to the aperture less ``edge_px`` pixels of its rim (the detected aperture's rim pixels carry
+the lowest fringe modulation and the station's worst phase: 0.3-4 waves of PV on a few rim pixels
+of the simulated stations, see docs/station.md; a solver would chase them), then has the
+configured target figure subtracted (if any) and piston, tip and tilt removed by a
 least-squares plane on the aperture, before the maps are averaged: tilt and piston change from
 result to result with alignment and vibration, and are not polished. The noise estimate is the
 standard error of the mean, ``sqrt(mean over the aperture of the per-pixel variance across the N
@@ -25,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import ndimage
 
 __all__ = ["ApertureKey", "MapSample", "Measurement", "UntrustedMeasurement", "average_surface", "remove_ptt",
            "surface_stats"]
@@ -199,7 +203,8 @@ def _check_samples(samples: Sequence[MapSample], min_count: int, not_before_ns: 
 
 def average_surface(samples: Sequence[MapSample], *, wavelength_nm: float, reflection_factor: float,
                     min_count: int, reference: ApertureKey | None = None, target_nm: NDArray[np.floating] | None = None,
-                    not_before_ns: int | None = None, max_noise_rms_nm: float | None = None) -> Measurement:
+                    not_before_ns: int | None = None, max_noise_rms_nm: float | None = None,
+                    edge_px: int = 0) -> Measurement:
     """Average live maps into a trusted surface measurement (pure; module notes).
 
     Parameters
@@ -220,6 +225,9 @@ def average_surface(samples: Sequence[MapSample], *, wavelength_nm: float, refle
         The machine's last done: a map exposed before it shows the surface before polishing.
     max_noise_rms_nm : float, optional
         Refuse a noisier average.
+    edge_px : int
+        Pixels taken off the aperture's rim (a binary erosion with a 3 x 3 square, ``edge_px``
+        times) before anything else.
 
     Returns
     -------
@@ -240,6 +248,11 @@ def average_surface(samples: Sequence[MapSample], *, wavelength_nm: float, refle
     if not (wavelength_nm > 0 and reflection_factor > 0):
         raise ValueError(f"wavelength_nm and reflection_factor must be > 0, got {wavelength_nm}, {reflection_factor}")
     mask = _check_samples(samples, min_count, not_before_ns)
+    if edge_px > 0:
+        mask = ndimage.binary_erosion(mask, structure=np.ones((3, 3), bool), iterations=edge_px)
+        if mask.sum() < 3:
+            raise UntrustedMeasurement(f"the aperture less {edge_px} rim pixels has {int(mask.sum())} pixels; "
+                                       "expected at least 3")
     key = ApertureKey.of(mask)
     if reference is not None and key != reference:
         raise UntrustedMeasurement(f"aperture changed: {key.pixels} pixels (mask {key.digest}), expected the "
