@@ -18,29 +18,24 @@ import argparse
 import logging
 import os
 import sys
-import tempfile
 import threading
 from contextlib import ExitStack
 from pathlib import Path
 from typing import TextIO
-
-import numpy as np
 
 from wavestack import __version__
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.outputs import json_text
 from wavestack.cli.signals import stop_on_signals
-from wavestack.config.polishing import PolishingConfig, load_polishing_config
+from wavestack.config.polishing import load_polishing_config
 from wavestack.pipeline import InputError
-from wavestack.polish.live_maps import LiveMaps
 from wavestack.polish.loop import CampaignSummary, LoopOptions, PolishingLoop
-from wavestack.polish.planning import host_tif
 from wavestack.polish.recorder import CampaignRecorder
 from wavestack.polish.run_record import RunRecord, run_line
+from wavestack.polish.session import open_session
 from wavestack.polish.state import LoopPhase
 from wavestack.recording import check_recording_path
-from wavestack.station import Station, open_station_devices
 
 logger = logging.getLogger(__name__)
 
@@ -86,20 +81,6 @@ def check_plots_folder(text: str) -> Path:
     return folder
 
 
-def _target_figure(config: PolishingConfig) -> np.ndarray | None:
-    path = config.resolve(config.polishing.target_figure)
-    if path is None:
-        return None
-    try:
-        target = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as error:
-        raise InputError(f"{path}: [polishing] target_figure: cannot read a .npy map ({error})") from None
-    shape = (config.station.camera_simulator.height, config.station.camera_simulator.width)
-    if target.ndim != 2 or (config.station.camera.simulated and target.shape != shape):
-        raise InputError(f"{path}: [polishing] target_figure: expected a {shape} map in nm, got shape {target.shape}")
-    return target.astype(np.float64)
-
-
 class _Printer:
     """Runs and transitions to standard output: lines, or JSON objects with ``--json``."""
 
@@ -126,30 +107,6 @@ class _Printer:
         self._stream.flush()
 
 
-def _start_station(stack: ExitStack, station: Station, maps: LiveMaps) -> None:
-    """The station on its own thread until the command ends (its heartbeat keeps the PLC's watchdog fed)."""
-    halt = threading.Event()
-
-    def serve() -> None:
-        why = "stopped"
-        try:
-            station.run(stop=halt, on_result=maps)
-        except Exception as error:  # the loop reports it as an untrusted measurement or a machine fault
-            logger.error("the station stopped: %s", error, exc_info=True)
-            why = f"{type(error).__name__}: {error}"
-        finally:
-            maps.end(why)
-
-    thread = threading.Thread(target=serve, name="polish-station")
-    thread.start()
-
-    def stop_station() -> None:
-        halt.set()
-        thread.join()
-
-    stack.callback(stop_station)
-
-
 def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Run one polishing campaign; returns the exit status (module notes)."""
     # every path first: a typo in --record or --plots must not cost opening every device
@@ -159,27 +116,15 @@ def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     settings = config.polishing
     options = LoopOptions(target_rms_nm=settings.target_rms_nm if args.target_rms_nm is None else args.target_rms_nm,
                           max_runs=args.max_runs or settings.max_runs, solver=args.solver or settings.solver)
-    try:
-        tif = host_tif(settings.tif, settings.pixel_mm, Path(config.source).resolve().parent)
-    except (OSError, ValueError) as error:
-        raise InputError(f"{config.source}: [polishing.tif]: {error}") from None
-    target = _target_figure(config)
     printer = _Printer(sys.stdout, args.json)
     stop = threading.Event()
     with ExitStack() as stack, stop_on_signals(stop):
-        job_folder = config.resolve(settings.job_folder)
-        if job_folder is None:
-            job_folder = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="wavestack-jobs-")))
+        session = open_session(config, stack)
         if plots is not None:
             plots.mkdir(exist_ok=True)
-        devices = open_station_devices(config.station, stack, job_folder=job_folder)
-        if devices.link is None:
-            raise InputError(f"{config.source}: the polishing loop needs the PLC link ([plc] and [outputs] enabled)")
-        station = Station(config.station, devices)
-        stack.callback(station.close)
         recorder = None
         if record_to is not None:
-            camera = devices.camera
+            camera = session.devices.camera
             recorder = CampaignRecorder(record_to, (camera.height, camera.width), config.text,
                                         {"software_version": __version__, "pixel_mm": settings.pixel_mm,
                                          "wavelength_nm": config.station.station.wavelength_nm,
@@ -187,11 +132,9 @@ def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
                                          "target_rms_nm": options.target_rms_nm})
             # an exception still ends the file in a clear state (close is idempotent)
             stack.callback(recorder.close, "faulted", "the command ended by an error", -1)
-        maps = LiveMaps()
-        _start_station(stack, station, maps)
-        loop = PolishingLoop(config, options, link=devices.link, maps=maps, tif=tif, job_folder=job_folder, stop=stop,
-                             recorder=recorder, plots=plots, target_nm=target, on_run=printer.run,
-                             on_event=printer.event)
+        loop = PolishingLoop(config, options, link=session.link, maps=session.maps, tif=session.tif,
+                             job_folder=session.job_folder, stop=stop, recorder=recorder, plots=plots,
+                             target_nm=session.target_nm, on_run=printer.run, on_event=printer.event)
         summary = loop.run()
         if recorder is not None:
             recorder.close(summary.state.phase.value, summary.state.reason or "", summary.state.runs_done)

@@ -7,7 +7,8 @@
     :class:`PolishingSettings`: the target, the run budget, the solver, the measurement (results
     averaged, noise limit, freshness), the job-level limits (removal depth per run, total dwell),
     the wait for the machine, the optic's scale (``pixel_mm`` on the camera grid,
-    ``reflection_factor``), and where job files go.
+    ``reflection_factor``). Job files go to ``[plc] job_folder`` (the machine's share; a temporary
+    folder when it is not set and the PLC is simulated).
 ``[polishing.tif]``
     :class:`TifSettings`: the host's model of the tool (Gaussian from FWHM and peak rate, or a
     measured TIF map file).
@@ -106,7 +107,6 @@ class PolishingSettings:
     reflection_factor: float = setting(2.0, minimum=0.1, maximum=10.0,
                                        doc="wavefront per surface (2: reflection at normal incidence)")
     target_figure: str | None = setting(None, doc="a .npy map of the target surface, nm, subtracted (else PTT only)")
-    job_folder: str | None = setting(None, doc="where job files go (None: a temporary folder, simulated PLC only)")
     tif: TifSettings = field(default_factory=TifSettings)
     machine: MachineSettings = field(default_factory=MachineSettings)
 

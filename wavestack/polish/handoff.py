@@ -1,8 +1,8 @@
 """Hand a job to the machine and wait for its end: the loop's only I/O with the polishing machine.
 
-:func:`hand_off` writes the job file atomically into the job folder, announces it over Modbus
-(id, CRC-32, point count, total dwell; the link refuses before the wire what its limits, the gate
-or an id already used forbid) and starts it. :func:`wait_for_done` then polls the machine's state
+:func:`write_job` writes the job file atomically into the job folder; :func:`announce_and_start`
+announces it over Modbus (id, CRC-32, point count, total dwell; the link refuses before the wire
+what its limits, the gate or an id already used forbid) and starts it. :func:`wait_for_done` then polls the machine's state
 every ``poll_s`` until the job ends, the timeout passes or the operator stops the loop; the
 station's own thread keeps the heartbeat going meanwhile, and the heartbeat it last saw is watched
 too. What ended the wait is one :class:`MachineEnd` value:
@@ -35,7 +35,7 @@ from wavestack.station.results import Heartbeat
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["MachineEnd", "hand_off", "wait_for_done"]
+__all__ = ["MachineEnd", "announce_and_start", "state_name", "wait_for_done", "write_job"]
 
 _TRIPPED_READS = 5  # state reads after a trip, for the points the machine had done
 
@@ -71,27 +71,38 @@ class MachineEnd:
         return self.state == "DONE"
 
 
-def hand_off(link: PolishingLink, folder: Path, job: JobFile, *, timeout_s: float) -> JobReceipt:
-    """Write, announce and start ``job``; returns the written file's receipt.
+def write_job(folder: Path, job: JobFile) -> JobReceipt:
+    """Write ``job`` atomically into the job folder; returns its receipt (path, CRC-32, points, dwell).
 
     Raises
     ------
-    JobRefused
-        The link's limits or gate refused the job before the wire.
-    DeviceError
-        The PLC did not take it.
     OSError
         The job folder cannot be written.
     """
     receipt = write_job_file(folder, job)
     logger.info("job %d written: %s (CRC-32 %08x, %d points, %.1f s)", job.job_id, receipt.path, receipt.crc32,
                 receipt.point_count, receipt.total_dwell_s)
-    link.load_job(receipt, job.job_id, timeout_s=timeout_s)
-    link.start_job(job.job_id, timeout_s=timeout_s)
     return receipt
 
 
-def _name(value: object) -> str:
+def announce_and_start(link: PolishingLink, receipt: JobReceipt, job_id: int, *, timeout_s: float) -> None:
+    """Announce the written job over Modbus and start it.
+
+    Raises
+    ------
+    JobRefused
+        The link's limits or gate refused it before the wire.
+    JobRejected
+        The machine refused it (its state and reason code on the error's ``status``).
+    DeviceError
+        The PLC did not take it.
+    """
+    link.load_job(receipt, job_id, timeout_s=timeout_s)
+    link.start_job(job_id, timeout_s=timeout_s)
+
+
+def state_name(value: object) -> str:
+    """An enum member's name (a state or reason code), or the text of anything else."""
     return str(getattr(value, "name", value) or "")
 
 
@@ -118,7 +129,7 @@ def wait_for_done(link: PolishingLink, job_id: int, *, timeout_s: float, poll_s:
             last_error = str(error)
             logger.warning("job %d: machine state not read (%s); retrying", job_id, error)
         else:
-            state, reason = _name(status.state), _name(status.reason)
+            state, reason = state_name(status.state), state_name(status.reason)
             ours = status.job_id == job_id
             if ours:
                 points_done, point_count = int(status.points_done), int(status.point_count)

@@ -30,7 +30,7 @@ from wavestack.config.polishing import PolishingConfig
 from wavestack.drivers.errors import DeviceError
 from wavestack.drivers.plc import PolishingLink
 from wavestack.pipeline.polishing import ToolInfluence
-from wavestack.polish.handoff import MachineEnd, hand_off, wait_for_done
+from wavestack.polish.handoff import MachineEnd, announce_and_start, state_name, wait_for_done, write_job
 from wavestack.polish.job_checks import JobRules, JobUnsafe, check_job
 from wavestack.polish.live_maps import LiveMaps
 from wavestack.polish.measurement import ApertureKey, Measurement, UntrustedMeasurement, average_surface
@@ -235,17 +235,18 @@ class PolishingLoop:
         return LoopEvent.PROGRAMMED, "program within the machine's and the job's limits"
 
     def _hand_off(self, c: _Campaign) -> tuple[LoopEvent, str]:
+        """Write the job, record it, announce and start it: a job refused is on record with the machine's reason."""
         assert c.measurement is not None and c.planned is not None
         m, planned = c.measurement, c.planned
         try:
             job_id = self._link.next_job_id()
-            job = job_file_of(planned, job_id, self._settings.tif, m.aperture.to_json(), self._settings.pixel_mm)
-            receipt = hand_off(self._link, self._folder, job, timeout_s=self._io_timeout_s)
-        except (DeviceError, OSError, ValueError) as error:  # JobRefused is a ValueError or a DeviceError
-            return LoopEvent.FAULT, f"job not handed off: {error}"
+            receipt = write_job(self._folder, job_file_of(planned, job_id, self._tif, m.aperture.to_json(),
+                                                          self._settings.pixel_mm))
+        except (DeviceError, OSError, ValueError) as error:
+            return LoopEvent.FAULT, f"job not written: {error}"
         row = run_started(c.state.runs_done + 1, job_id, rms_before_nm=m.rms_nm, pv_before_nm=m.pv_nm,
                           noise_before_nm=m.noise_rms_nm, predicted_rms_nm=planned.predicted_rms_nm,
-                          predicted_pv_nm=planned.predicted_pv_nm, total_dwell_s=float(planned.dwell_s.sum()),
+                          predicted_pv_nm=planned.predicted_pv_nm, total_dwell_s=float(receipt.total_dwell_s),
                           points=int(receipt.point_count), job_crc32=int(receipt.crc32), started_unix_s=time.time(),
                           solve_s=planned.solve_s)
         index = None
@@ -255,6 +256,14 @@ class PolishingLoop:
                                                job_file=Path(receipt.path).read_bytes())
         c.run = _Run(row, index, planned, m, time.monotonic())
         c.previous_rms_nm = m.rms_nm
+        try:
+            announce_and_start(self._link, receipt, job_id, timeout_s=self._io_timeout_s)
+        except (DeviceError, ValueError) as error:  # JobRefused, JobRejected, a PLC that did not answer
+            status = getattr(error, "status", None)
+            c.run.end = MachineEnd(state_name(getattr(status, "state", "")) or "NOT_STARTED",
+                                   state_name(getattr(status, "reason", "")), int(getattr(status, "points_done", 0)),
+                                   int(getattr(status, "point_count", receipt.point_count)), str(error), time.time_ns())
+            return LoopEvent.FAULT, f"job {job_id} not started: {error}"
         return LoopEvent.HANDED_OFF, (f"job {job_id} started: {receipt.point_count} points, "
                                       f"{receipt.total_dwell_s:.0f} s dwell, CRC-32 {receipt.crc32:08x}")
 

@@ -37,7 +37,7 @@ from wavestack.pipeline.polishing import (
 )
 from wavestack.polish.measurement import Measurement
 
-__all__ = ["PlannedJob", "host_tif", "job_file_of", "machine_limits", "plan_job", "tif_description"]
+__all__ = ["PlannedJob", "host_tif", "job_file_of", "machine_limits", "lattice_points", "plan_job"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,11 +82,17 @@ def host_tif(settings: TifSettings, pixel_mm: float, base: Path | None = None) -
     return ToolInfluence.from_map(np.load(path, allow_pickle=False), pixel_mm)
 
 
-def tif_description(settings: TifSettings) -> dict[str, object]:
-    """The job file's ``tif`` (plain JSON)."""
-    if settings.kind == "gaussian":
-        return {"kind": "gaussian", "fwhm_mm": settings.fwhm_mm, "peak_rate_nm_s": settings.peak_rate_nm_s}
-    return {"kind": "map", "file": settings.file}
+def lattice_points(shape: tuple[int, int], step_px: int) -> NDArray[np.intp]:
+    """(K, 2) (row, col) pixels every ``step_px`` pixels each way, centred on the grid.
+
+    Example
+    -------
+    >>> lattice_points((5, 5), 2).tolist()
+    [[0, 0], [0, 2], [0, 4], [2, 0], [2, 2], [2, 4], [4, 0], [4, 2], [4, 4]]
+    """
+    axes = [np.arange((n - 1) // 2 % step_px, n, step_px) for n in shape]
+    rows, cols = np.meshgrid(*axes, indexing="ij")
+    return np.column_stack([rows.ravel(), cols.ravel()]).astype(np.intp)
 
 
 def machine_limits(settings: PolishingSettings) -> MachineLimits:
@@ -121,8 +127,8 @@ def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSe
     kind = solver or settings.solver
     if kind == "fft":
         solution = solve_dwell_fft(surface, mask, tif)
-    elif kind == "lsq":
-        solution = solve_dwell_lsq(surface, mask, tif, points_px=None,
+    elif kind == "lsq":  # one dwell point per program lattice point: the matrix stays within its budget
+        solution = solve_dwell_lsq(surface, mask, tif, points_px=lattice_points(mask.shape, settings.machine.step_px),
                                    max_dwell_s=settings.machine.max_dwell_per_point_s)
     else:
         raise ValueError(f"solver: expected 'fft' or 'lsq', got {kind!r}")
@@ -138,12 +144,12 @@ def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSe
                       float(pv), time.perf_counter() - tick)
 
 
-def job_file_of(job: PlannedJob, job_id: int, tif: TifSettings, aperture: dict[str, object],
+def job_file_of(job: PlannedJob, job_id: int, tif: ToolInfluence, aperture: dict[str, object],
                 pixel_mm: float) -> JobFile:
     """The job file value of a planned job (the driver writes it)."""
     program = job.program
     return JobFile(job_id=job_id, x_mm=np.asarray(program.x_mm, dtype=np.float64),
                    y_mm=np.asarray(program.y_mm, dtype=np.float64), dwell_s=np.asarray(program.dwell_s, np.float64),
                    feed_mm_s=np.asarray(program.feed_mm_s, dtype=np.float64), pixel_mm=pixel_mm,
-                   tif=tif_description(tif), aperture=dict(aperture),
+                   tif=tif.as_dict(), aperture=dict(aperture),
                    created_utc=datetime.now(timezone.utc).isoformat())
