@@ -189,7 +189,20 @@ def parse_polishing_config(text: str, *, source: str) -> PolishingConfig:
                           "polishing loop measures on the camera's pixel grid; expected 1")
     if station.plc is None:
         raise ConfigError(f"{source}: missing table [plc]: the polishing loop hands its jobs to the machine's PLC")
+    _check_simulated_surface(station, polishing, source)
     return PolishingConfig(source=source, text=text, station=station, polishing=polishing)
+
+
+def _check_simulated_surface(station: StationConfig, polishing: PolishingSettings, source: str) -> None:
+    """A simulated optic's surface is on the grid the loop assumes: same pixel size, same reflection factor."""
+    surface = getattr(station.optic, "surface", None) if station.camera.simulated else None
+    if surface is None:
+        return
+    for key in ("pixel_mm", "reflection_factor"):
+        simulated, assumed = getattr(surface, key), getattr(polishing, key)
+        if simulated != assumed:
+            raise ConfigError(f"{source}: [polishing] {key} = {assumed:g} differs from the simulated optic's "
+                              f"[optic.surface] {key} = {simulated:g}; expected the same")
 
 
 def load_polishing_config(path: str | Path | None = None) -> PolishingConfig:
