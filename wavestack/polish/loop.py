@@ -215,14 +215,18 @@ class PolishingLoop:
 
     def _solve(self, c: _Campaign) -> tuple[LoopEvent, str]:
         assert c.measurement is not None
+        m = c.measurement
         try:
-            c.planned = plan_job(c.measurement, self._tif, self._settings, solver=self._options.solver)
-        except ValueError as error:  # ProgramRejected and the solvers' refusals are ValueErrors
+            c.planned = plan_job(m, self._tif, self._settings, solver=self._options.solver)
+        except ValueError as error:  # NoFittingJob, a solver's refusal
             return LoopEvent.FAULT, f"no job: {error}"
         p = c.planned
-        return LoopEvent.SOLVED, (f"{self._options.solver} dwell: {p.program.x_mm.size} points, "
-                                  f"{p.program.total_dwell_s:.0f} s; predicted {p.predicted_rms_nm:.2f} nm RMS "
-                                  f"({p.solve_s:.1f} s)")
+        what = (f"{self._options.solver} dwell ({p.gentleness:g}): {p.program.x_mm.size} points, "
+                f"{p.program.total_dwell_s:.0f} s; predicted {p.predicted_rms_nm:.2f} nm RMS ({p.solve_s:.1f} s)")
+        if not p.predicted_rms_nm < m.rms_nm * (1.0 - self._settings.min_improvement):
+            return LoopEvent.NO_GAIN, f"at the floor: the best job within the limits is not predicted to improve " \
+                                      f"on {m.rms_nm:.2f} nm ({what})"
+        return LoopEvent.SOLVED, what
 
     def _program(self, c: _Campaign) -> tuple[LoopEvent, str]:
         assert c.measurement is not None and c.planned is not None and c.reference is not None
@@ -263,7 +267,8 @@ class PolishingLoop:
             c.run.end = MachineEnd(state_name(getattr(status, "state", "")) or "NOT_STARTED",
                                    state_name(getattr(status, "reason", "")), int(getattr(status, "points_done", 0)),
                                    int(getattr(status, "point_count", receipt.point_count)), str(error), time.time_ns())
-            return LoopEvent.FAULT, f"job {job_id} not started: {error}"
+            code = f" ({c.run.end.state} {c.run.end.reason})" if c.run.end.reason else ""
+            return LoopEvent.FAULT, f"job {job_id} not started{code}: {error}"
         return LoopEvent.HANDED_OFF, (f"job {job_id} started: {receipt.point_count} points, "
                                       f"{receipt.total_dwell_s:.0f} s dwell, CRC-32 {receipt.crc32:08x}")
 
@@ -279,7 +284,7 @@ class PolishingLoop:
         if end.reason == "STOPPED":
             return LoopEvent.STOP, end.detail
         self._measure_after_fault(c)
-        return LoopEvent.FAULT, f"machine: {end.detail}"
+        return LoopEvent.FAULT, f"machine {end.state} ({end.reason or 'no reason'}): {end.detail}"
 
     def _measure_after_fault(self, c: _Campaign) -> None:
         """One more measurement for the record of a job that ended early (never used for a job)."""

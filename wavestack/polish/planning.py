@@ -4,7 +4,13 @@
 (:func:`~wavestack.pipeline.polishing.solve_dwell_fft`, RIFTA, or the bounded least squares of
 :func:`~wavestack.pipeline.polishing.solve_dwell_lsq`); the machine program is planned from it along
 the configured path and checked against the machine's limits (:func:`plan_program`,
-:func:`check_program`). The prediction is made from what the machine will *execute* -- the
+:func:`check_program`). A solver that inverts its filter as far as the residual allows can ask
+for more dwell than the machine takes (on a residual that is mostly fine structure and noise, the
+least-RMS inverse filter gives an oscillating dwell of hours with a huge piston): the plan then
+tries gentler solutions in turn (:data:`GENTLER`: RIFTA's threshold chosen with a larger residual
+tolerance, or more damping of the least squares) until the program fits the machine's limits and
+the job's removal depth, and refuses with every reason when none does (:class:`NoFittingJob`).
+The prediction is made from what the machine will *execute* -- the
 program's own dwell map, convolved with the host's TIF -- not from the solver's ideal map, so the
 predicted residual is the one the measured residual should be compared with. :func:`job_file_of`
 then makes the self-describing job file value of the program.
@@ -12,10 +18,12 @@ then makes the self-describing job file value of the program.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,6 +35,7 @@ from wavestack.pipeline.polishing import (
     GridFrame,
     MachineLimits,
     MachineProgram,
+    ProgramRejected,
     ToolInfluence,
     check_program,
     plan_program,
@@ -37,7 +46,19 @@ from wavestack.pipeline.polishing import (
 )
 from wavestack.polish.measurement import Measurement
 
-__all__ = ["PlannedJob", "host_tif", "job_file_of", "machine_limits", "lattice_points", "plan_job"]
+logger = logging.getLogger(__name__)
+
+__all__ = ["GENTLER", "NoFittingJob", "PlannedJob", "host_tif", "job_file_of", "machine_limits", "lattice_points", "plan_job"]
+
+
+#: The solvers' settings tried in turn, gentlest last: ``rms_tolerance`` of the FFT solver (the
+#: residual it may leave above its best, as a fraction of the input RMS) and ``damping`` of the
+#: least squares.
+GENTLER: Final = {"fft": (0.02, 0.05, 0.1, 0.2, 0.4), "lsq": (0.0, 1e-3, 1e-2, 1e-1, 1.0)}
+
+
+class NoFittingJob(ValueError):
+    """No solution of the ladder fits the machine and the job limits; the message gives each reason."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,7 +79,9 @@ class PlannedJob:
         Predicted surface after the job, nm, NaN outside the aperture, piston removed.
     predicted_rms_nm, predicted_pv_nm : float
     solve_s : float
-        Seconds the solver and planner took.
+        Seconds the solver and planner took (every attempt).
+    gentleness : float
+        The setting of :data:`GENTLER` the job was solved with.
     """
 
     solution: DwellSolution
@@ -69,6 +92,7 @@ class PlannedJob:
     predicted_rms_nm: float
     predicted_pv_nm: float
     solve_s: float
+    gentleness: float = 0.0
 
 
 def host_tif(settings: TifSettings, pixel_mm: float, base: Path | None = None) -> ToolInfluence:
@@ -104,9 +128,20 @@ def machine_limits(settings: PolishingSettings) -> MachineLimits:
                          max_total_dwell_s=settings.max_total_dwell_s)
 
 
+def _solve(measurement: Measurement, tif: ToolInfluence, settings: PolishingSettings, kind: str,
+           gentleness: float) -> DwellSolution:
+    surface, mask = measurement.surface_nm, measurement.mask
+    if kind == "fft":
+        return solve_dwell_fft(surface, mask, tif, rms_tolerance=gentleness)
+    if kind == "lsq":  # one dwell point per program lattice point: the matrix stays within its budget
+        return solve_dwell_lsq(surface, mask, tif, points_px=lattice_points(mask.shape, settings.machine.step_px),
+                               max_dwell_s=settings.machine.max_dwell_per_point_s, damping=gentleness)
+    raise ValueError(f"solver: expected 'fft' or 'lsq', got {kind!r}")
+
+
 def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSettings, *,
              solver: str | None = None) -> PlannedJob:
-    """Solve, plan and check one job for ``measurement`` (module notes).
+    """Solve, plan and check one job for ``measurement``, gentler until it fits (module notes).
 
     Parameters
     ----------
@@ -119,29 +154,41 @@ def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSe
 
     Raises
     ------
-    ProgramRejected
-        The program cannot be made to fit the machine's limits.
+    NoFittingJob
+        No solution of the ladder fits the limits.
+    ValueError
+        A solver that refuses its input.
     """
     tick = time.perf_counter()
-    surface, mask = measurement.surface_nm, measurement.mask
     kind = solver or settings.solver
-    if kind == "fft":
-        solution = solve_dwell_fft(surface, mask, tif)
-    elif kind == "lsq":  # one dwell point per program lattice point: the matrix stays within its budget
-        solution = solve_dwell_lsq(surface, mask, tif, points_px=lattice_points(mask.shape, settings.machine.step_px),
-                                   max_dwell_s=settings.machine.max_dwell_per_point_s)
-    else:
+    if kind not in GENTLER:
         raise ValueError(f"solver: expected 'fft' or 'lsq', got {kind!r}")
-    frame = GridFrame(shape=mask.shape, pixel_mm=settings.pixel_mm)
+    frame = GridFrame(shape=measurement.mask.shape, pixel_mm=settings.pixel_mm)
     limits = machine_limits(settings)
-    program = plan_program(solution.dwell_s, frame, limits, path=settings.machine.path,
-                           step_px=settings.machine.step_px)
-    check_program(program, limits)
-    executed = np.asarray(program.dwell_map(frame), dtype=np.float64)
-    removal = np.asarray(removal_nm(executed, tif), dtype=np.float64)
-    residual, rms, pv = residual_after(surface, mask, removal)
-    return PlannedJob(solution, program, executed, removal, np.asarray(residual, dtype=np.float64), float(rms),
-                      float(pv), time.perf_counter() - tick)
+    refusals: list[str] = []
+    for gentleness in GENTLER[kind]:
+        solution = _solve(measurement, tif, settings, kind, gentleness)
+        try:
+            program = plan_program(solution.dwell_s, frame, limits, path=settings.machine.path,
+                                   step_px=settings.machine.step_px)
+            check_program(program, limits)
+        except ProgramRejected as error:
+            refusals.append(f"{gentleness:g}: {error}")
+            continue
+        executed = np.asarray(program.dwell_map(frame), dtype=np.float64)
+        removal = np.asarray(removal_nm(executed, tif), dtype=np.float64)
+        deepest = float(removal.max(initial=0.0))
+        if deepest > settings.max_removal_nm_per_run:
+            refusals.append(f"{gentleness:g}: removal {deepest:.0f} nm deep > max_removal_nm_per_run = "
+                            f"{settings.max_removal_nm_per_run:g}")
+            continue
+        residual, rms, pv = residual_after(measurement.surface_nm, measurement.mask, removal)
+        if refusals:
+            logger.info("job planned with %s %g after %d gentler tries: %s", kind, gentleness, len(refusals),
+                        "; ".join(refusals))
+        return PlannedJob(solution, program, executed, removal, np.asarray(residual, dtype=np.float64), float(rms),
+                          float(pv), time.perf_counter() - tick, gentleness)
+    raise NoFittingJob(f"no {kind} job fits the limits ({len(refusals)} tried): " + "; ".join(refusals))
 
 
 def job_file_of(job: PlannedJob, job_id: int, tif: ToolInfluence, aperture: dict[str, object],

@@ -34,7 +34,7 @@ class LoopPhase(enum.Enum):
     POLISHING = "polishing"          # waiting for the machine's done
     TARGET_MET = "target-met"        # terminal: RMS at or below the target
     MAX_RUNS = "max-runs"            # terminal: the run budget is spent
-    NOT_IMPROVING = "not-improving"  # terminal: the last run did not lower the RMS
+    NOT_IMPROVING = "not-improving"  # terminal: the last run did not lower the RMS, or no job would
     FAULTED = "faulted"              # terminal: a fault (the reason says which)
     INTERRUPTED = "interrupted"      # terminal: the operator stopped the loop
 
@@ -49,6 +49,7 @@ class LoopEvent(enum.Enum):
     NOT_IMPROVED = "not-improved"
     NEEDS_WORK = "needs-work"
     SOLVED = "solved"
+    NO_GAIN = "no-gain"              # the best job within the limits is not predicted to lower the RMS
     PROGRAMMED = "programmed"
     HANDED_OFF = "handed-off"        # the machine accepted and started the job
     MACHINE_DONE = "machine-done"    # the machine finished the job
@@ -71,6 +72,7 @@ TRANSITIONS: Final[dict[tuple[LoopPhase, LoopEvent], LoopPhase]] = {
     (_P.CHECKING, _E.NOT_IMPROVED): _P.NOT_IMPROVING,
     (_P.CHECKING, _E.NEEDS_WORK): _P.SOLVING,
     (_P.SOLVING, _E.SOLVED): _P.PROGRAMMING,
+    (_P.SOLVING, _E.NO_GAIN): _P.NOT_IMPROVING,
     (_P.PROGRAMMING, _E.PROGRAMMED): _P.HANDING_OFF,
     (_P.HANDING_OFF, _E.HANDED_OFF): _P.POLISHING,
     (_P.POLISHING, _E.MACHINE_DONE): _P.MEASURING,
