@@ -11,8 +11,9 @@ too. What ended the wait is one :class:`MachineEnd` value:
 - ``ABORTED`` or ``FAULT`` (an e-stop, a watchdog trip, a job the machine refused: its reason code);
 - the machine idle or holding another job once the start had time to show (a PLC restart lost
   it): never started again, the loop faults;
-- the watchdog tripped (the station's heartbeat says so): the state is read a few more times for
-  the points done, then the wait ends;
+- the watchdog tripped (the station's heartbeat says so), or the PLC refuses read after read with
+  exception 4 (tripped or e-stopped, also when the station's heartbeat has stopped): the state is
+  read a few more times for the points done, then the wait ends;
 - no answer before ``timeout_s`` (a PLC that stays away), or a stop by the operator: the host then
   stops its heartbeat with the station, and the PLC's watchdog stops the machine.
 
@@ -38,6 +39,7 @@ logger = logging.getLogger(__name__)
 __all__ = ["MachineEnd", "announce_and_start", "state_name", "wait_for_done", "write_job"]
 
 _TRIPPED_READS = 5  # state reads after a trip, for the points the machine had done
+_DEVICE_FAILURE = 4  # the Modbus exception a tripped (or e-stopped) PLC answers
 
 
 @dataclass(frozen=True)
@@ -119,6 +121,7 @@ def wait_for_done(link: PolishingLink, job_id: int, *, timeout_s: float, poll_s:
     def end(state: str, reason: str, detail: str) -> MachineEnd:
         return MachineEnd(state, reason, points_done, point_count, detail, time.time_ns())
 
+    refused_reads = 0
     while True:
         beat = heartbeat()
         if beat is not None and beat.watchdog_tripped:
@@ -127,6 +130,7 @@ def wait_for_done(link: PolishingLink, job_id: int, *, timeout_s: float, poll_s:
             status = link.read_machine(io_timeout_s)
         except DeviceError as error:
             last_error = str(error)
+            refused_reads += getattr(error, "exception_code", None) == _DEVICE_FAILURE
             logger.warning("job %d: machine state not read (%s); retrying", job_id, error)
         else:
             state, reason = state_name(status.state), state_name(status.reason)
@@ -144,6 +148,10 @@ def wait_for_done(link: PolishingLink, job_id: int, *, timeout_s: float, poll_s:
         if tripped_reads > _TRIPPED_READS:
             return end("UNKNOWN", "WATCHDOG", f"the PLC watchdog tripped during job {job_id} "
                                               f"({points_done}/{point_count} points done when last read)")
+        if refused_reads > _TRIPPED_READS:  # the station may have stopped: the PLC's own word, read after read
+            return end("UNKNOWN", "PLC_REFUSED", f"the PLC refuses every read during job {job_id} (exception 4: "
+                                                 f"watchdog tripped or e-stop; {points_done}/{point_count} points "
+                                                 "done when last read)")
         if time.monotonic() >= deadline:
             why = f"; last error: {last_error}" if last_error else ""
             return end("UNKNOWN", "TIMEOUT", f"job {job_id} not done within done_timeout_s = {timeout_s:g} s{why}")
