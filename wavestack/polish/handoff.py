@@ -49,9 +49,10 @@ class MachineEnd:
     Attributes
     ----------
     state : str
-        The machine state's name (``DONE``, ``ABORTED``, ``FAULT``, ``IDLE``, ...), or ``UNKNOWN``.
+        The machine state's name for this job (``DONE``, ``ABORTED``, ``FAULT``), ``LOST`` when the
+        machine shows another job or none (``reason`` then holds the state it shows), or ``UNKNOWN``.
     reason : str
-        The machine's reason code name (empty when none).
+        The machine's reason code name (empty when none), or why the wait ended without it.
     points_done, point_count : int
         Progress last read (-1 when never read).
     detail : str
@@ -143,7 +144,7 @@ def wait_for_done(link: PolishingLink, job_id: int, *, timeout_s: float, poll_s:
                 return end(state, reason, f"job {job_id} {state.lower()} ({reason or 'no reason given'}) after "
                                           f"{points_done}/{point_count} points")
             if not (ours and state in ("LOADED", "RUNNING")) and time.monotonic() - started > start_grace_s:
-                return end(state, reason, f"the machine is {state} with job {status.job_id}, not running job "
+                return end("LOST", state, f"the machine is {state} with job {status.job_id}, not running job "
                                           f"{job_id} (lost by a PLC restart?); it is not sent again")
         if tripped_reads > _TRIPPED_READS:
             return end("UNKNOWN", "WATCHDOG", f"the PLC watchdog tripped during job {job_id} "
