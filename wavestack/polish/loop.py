@@ -34,7 +34,7 @@ from wavestack.polish.handoff import MachineEnd, announce_and_start, state_name,
 from wavestack.polish.job_checks import JobRules, JobUnsafe, check_job
 from wavestack.polish.live_maps import LiveMaps
 from wavestack.polish.measurement import ApertureKey, Measurement, UntrustedMeasurement, average_surface
-from wavestack.polish.planning import PlannedJob, job_file_of, plan_job
+from wavestack.polish.planning import NoFittingJob, PlannedJob, job_file_of, plan_job
 from wavestack.polish.plots import plot_run
 from wavestack.polish.recorder import CampaignRecorder
 from wavestack.polish.run_record import RunRecord, run_finished, run_started
@@ -218,7 +218,11 @@ class PolishingLoop:
         m = c.measurement
         try:
             c.planned = plan_job(m, self._tif, self._settings, solver=self._options.solver)
-        except ValueError as error:  # NoFittingJob, a solver's refusal
+        except NoFittingJob as error:
+            if c.state.runs_done == 0:  # not one run possible: the limits or the solver need an operator
+                return LoopEvent.FAULT, f"no job: {error}"
+            return LoopEvent.NO_GAIN, f"at the floor within the machine's limits: {error}"
+        except ValueError as error:  # a solver's refusal
             return LoopEvent.FAULT, f"no job: {error}"
         p = c.planned
         what = (f"{self._options.solver} dwell ({p.gentleness:g}): {p.program.x_mm.size} points, "
