@@ -38,7 +38,6 @@ logger = logging.getLogger(__name__)
 
 __all__ = ["MachineEnd", "announce_and_start", "state_name", "wait_for_done", "write_job"]
 
-_TRIPPED_READS = 5  # state reads after a trip, for the points the machine had done
 _DEVICE_FAILURE = 4  # the Modbus exception a tripped (or e-stopped) PLC answers
 
 
@@ -111,27 +110,31 @@ def state_name(value: object) -> str:
 
 def wait_for_done(link: PolishingLink, job_id: int, *, timeout_s: float, poll_s: float, io_timeout_s: float,
                   stop: threading.Event, heartbeat: Callable[[], Heartbeat | None],
-                  start_grace_s: float = 2.0) -> MachineEnd:
-    """Poll the machine until job ``job_id`` ends (module notes); never raises a device error."""
+                  start_grace_s: float = 2.0, refused_wait_s: float = 2.0) -> MachineEnd:
+    """Poll the machine until job ``job_id`` ends (module notes); never raises a device error.
+
+    ``refused_wait_s``: how long a trip or refused reads persist before the wait ends (the PLC's
+    last word on the job is read meanwhile, and the station's heartbeat tells a trip from an e-stop).
+    """
     started = time.monotonic()
     deadline = started + timeout_s
     points_done = point_count = -1
     last_error: str | None = None
-    tripped_reads = 0
 
     def end(state: str, reason: str, detail: str) -> MachineEnd:
         return MachineEnd(state, reason, points_done, point_count, detail, time.time_ns())
 
-    refused_reads = 0
+    refused_since: float | None = None  # when the PLC first refused a read (or the heartbeat saw the trip)
+    tripped = False
     while True:
         beat = heartbeat()
-        if beat is not None and beat.watchdog_tripped:
-            tripped_reads += 1
+        tripped = tripped or bool(beat is not None and beat.watchdog_tripped)
+        refused = tripped
         try:
             status = link.read_machine(io_timeout_s)
         except DeviceError as error:
             last_error = str(error)
-            refused_reads += getattr(error, "exception_code", None) == _DEVICE_FAILURE
+            refused = refused or getattr(error, "exception_code", None) == _DEVICE_FAILURE
             logger.warning("job %d: machine state not read (%s); retrying", job_id, error)
         else:
             state, reason = state_name(status.state), state_name(status.reason)
@@ -146,11 +149,13 @@ def wait_for_done(link: PolishingLink, job_id: int, *, timeout_s: float, poll_s:
             if not (ours and state in ("LOADED", "RUNNING")) and time.monotonic() - started > start_grace_s:
                 return end("LOST", state, f"the machine is {state} with job {status.job_id}, not running job "
                                           f"{job_id} (lost by a PLC restart?); it is not sent again")
-        if tripped_reads > _TRIPPED_READS:
-            return end("UNKNOWN", "WATCHDOG", f"the PLC watchdog tripped during job {job_id} "
-                                              f"({points_done}/{point_count} points done when last read)")
-        if refused_reads > _TRIPPED_READS:  # the station may have stopped: the PLC's own word, read after read
-            return end("UNKNOWN", "PLC_REFUSED", f"the PLC refuses every read during job {job_id} (exception 4: "
+        if refused and refused_since is None:
+            refused_since = time.monotonic()
+        if refused_since is not None and time.monotonic() - refused_since >= refused_wait_s:
+            if tripped:
+                return end("UNKNOWN", "WATCHDOG", f"the PLC watchdog tripped during job {job_id} "
+                                                  f"({points_done}/{point_count} points done when last read)")
+            return end("UNKNOWN", "PLC_REFUSED", f"the PLC refuses machine reads during job {job_id} (exception 4: "
                                                  f"watchdog tripped or e-stop; {points_done}/{point_count} points "
                                                  "done when last read)")
         if time.monotonic() >= deadline:
