@@ -316,6 +316,7 @@ class PolishingLoop:
         if self._plots is not None:
             plot_run(self._plots, row, measured_nm=run.before.surface_nm, dwell_s=run.job.dwell_s,
                      predicted_residual_nm=run.job.residual_nm,
-                     measured_residual_nm=after.surface_nm if after else None, pixel_mm=self._settings.pixel_mm)
+                     measured_residual_nm=after.surface_nm if after else None, pixel_mm=self._settings.pixel_mm,
+                     step_px=self._settings.machine.step_px)
         if self._on_run is not None:
             self._on_run(row)

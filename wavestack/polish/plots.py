@@ -2,7 +2,7 @@
 
 People judge a surface by looking at it: the figures show each map on the measurement grid in mm
 (the machine frame of the contracts: x right, y up, origin at the grid centre), with a colour bar
-in nm (surfaces) or s (dwell) and a title giving its RMS and PV. The two residuals share one colour
+in nm (surfaces) or s/mm^2 (the dwell, as a density over one lattice cell) and a title giving its RMS and PV. The two residuals share one colour
 scale, so what the machine achieved reads directly against what the solver promised.
 matplotlib's Agg backend (no display) through the object API (``Figure``), so nothing global is set.
 """
@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
+from scipy import ndimage
 
 from wavestack.polish.run_record import RunRecord
 
@@ -52,7 +53,8 @@ def _panel(figure: Figure, axes, data: NDArray, extent: tuple[float, float, floa
 
 
 def plot_run(folder: Path, row: RunRecord, *, measured_nm: NDArray, dwell_s: NDArray,
-             predicted_residual_nm: NDArray, measured_residual_nm: NDArray | None, pixel_mm: float) -> Path:
+             predicted_residual_nm: NDArray, measured_residual_nm: NDArray | None, pixel_mm: float,
+             step_px: int = 1) -> Path:
     """Write run ``row.run``'s figure into ``folder``; returns its path.
 
     Parameters
@@ -65,6 +67,9 @@ def plot_run(folder: Path, row: RunRecord, *, measured_nm: NDArray, dwell_s: NDA
     measured_residual_nm : ndarray (H, W) or None
         The measurement after the job (None: not measured; the panel says so).
     pixel_mm : float
+    step_px : int
+        The dwell points' spacing, pixels: the dwell is drawn as a density (s/mm^2) averaged over
+        one lattice cell, not as isolated points.
     """
     rows, cols = np.shape(measured_nm)
     half_w, half_h = (cols - 1) / 2 * pixel_mm, (rows - 1) / 2 * pixel_mm
@@ -74,14 +79,16 @@ def plot_run(folder: Path, row: RunRecord, *, measured_nm: NDArray, dwell_s: NDA
     residuals = residuals[np.isfinite(residuals)]
     bound = float(np.max(np.abs(residuals))) if residuals.size else 1.0
     shared = (-bound, bound) if math.isfinite(bound) and bound > 0 else None
-    dwell = np.where(np.asarray(dwell_s) > 0, dwell_s, np.nan)
+    density = ndimage.uniform_filter(np.asarray(dwell_s, dtype=np.float64), size=max(1, step_px), mode="constant")
+    floor = 1e-9 * float(density.max(initial=0.0))  # the running-sum filter leaves ~1e-17 where no dwell is
+    dwell = np.where(density > floor, density / pixel_mm**2, np.nan)  # s per mm^2 of the part
     figure = Figure(figsize=(11, 9), layout="constrained")
     FigureCanvasAgg(figure)
     grid = figure.subplots(2, 2)
     _panel(figure, grid[0, 0], measured_nm, extent, f"measured surface before (nm): {_stats(measured_nm)}",
            "surface, nm", None, "RdBu_r")
-    _panel(figure, grid[0, 1], dwell, extent, f"dwell map (s per dwell point): total {row.total_dwell_s:.0f} s",
-           "dwell, s", None, "viridis")
+    _panel(figure, grid[0, 1], dwell, extent, f"dwell density (s/mm^2): total {row.total_dwell_s:.0f} s, "
+           f"{row.points} points", "dwell, s/mm^2", None, "viridis")
     _panel(figure, grid[1, 0], predicted_residual_nm, extent,
            f"predicted residual (nm): {_stats(np.asarray(predicted_residual_nm))}", "surface, nm", shared, "RdBu_r")
     _panel(figure, grid[1, 1], after, extent, f"measured residual (nm): {_stats(after)}", "surface, nm", shared,
