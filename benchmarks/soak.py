@@ -9,7 +9,8 @@ and runs it in a thread. A scheduler thread injects a fault every ``--fault-ever
 counted from the station's first result), kind and parameters drawn from ``--seed``, through the
 simulators' own switches only (camera unplug/replug and stream faults, piezo garbage, silence,
 split replies, unplug, PLC reply faults, delay, restart, frozen heartbeat echo, e-stop;
-``--list-faults``). A monitor thread samples VmRSS (``/proc/self/status``) and the counters every
+``--list-faults``). A monitor thread samples VmRSS (``/proc/self/status``), the peak RSS since
+the previous sample (VmHWM, reset through ``/proc/self/clear_refs``) and the counters every
 ``--sample-every-s``.
 
 A PLC watchdog trip is the designed fail-safe when a PLC fault kept the PLC out for longer than
@@ -24,9 +25,11 @@ SIGTERM ends the run early, with the report.
 
 Printed: a table over time (RSS, results, frame counters, faults so far), one row per fault
 (its parameters, the signals it left in the results and counters, the time to the next valid
-result, its problems), the faults by kind, every failure, and the verdict: RSS slope after the
-warm-up (least squares, MB/min; over the last station's life only, a rebuilt station's heap being
-new) and its largest deviation from the post-warm-up mean (target +-5 %), faults unaccounted for,
+result, its problems), the faults by kind, every failure, and the verdict: the slope of the peak
+RSS per sample window after the warm-up (the instantaneous RSS is reported beside it: once the
+station gives freed memory back, ``[station] heap_release_s``, an instant sample lands anywhere in
+the swing of one set's arrays; least squares, MB/min; over the last station's life only, a rebuilt
+station's heap being new) and its largest deviation from the post-warm-up mean (target +-5 %), faults unaccounted for,
 watchdog trips (fail-safe / FAILURE), operator re-arms and the commands the PLC accepted after them,
 station rebuilds, commands sent while the PLC was not scanning (UNSAFE), unhandled exceptions, results per second. ``--tracemalloc`` adds
 the allocation sites that grew from the end of the warm-up to the end, the station still running
@@ -393,8 +396,9 @@ def _report(args: argparse.Namespace, config: StationConfig, schedule: list[Sche
            "first_result_t_s": first_result_t_s, "operator_rearm_s": args.operator_rearm_s,
            "rearms": _rearms(monitor),
            "log_counts": dict(log_counter.counts.most_common(12))}
-    rss = rss_verdict(monitor.samples, args.warmup_s)
-    report = verdict_json(run, monitor.samples, rss, observer.windows, failures.entries, sites)
+    rss = rss_verdict(monitor.samples, args.warmup_s, measure="peak")
+    instant = rss_verdict(monitor.samples, args.warmup_s, measure="rss")
+    report = verdict_json(run, monitor.samples, rss, observer.windows, failures.entries, sites, instant)
     summary = runner.summaries[-1] if runner.summaries else None
     lines = [f"station runs {run['station_runs']} (crashes {runner.crashes}, restarts {runner.restarts}); "
              f"log: " + ", ".join(f"{k} {v}" for k, v in run["log_counts"].items())]

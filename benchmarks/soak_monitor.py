@@ -27,7 +27,7 @@ from soak_operator import Operator
 from soak_report import Sample
 from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip
 
-__all__ = ["Monitor", "rss_mb"]
+__all__ = ["Monitor", "peak_rss_mb", "rss_mb"]
 
 
 def rss_mb() -> float:
@@ -37,6 +37,23 @@ def rss_mb() -> float:
             if line.startswith("VmRSS:"):
                 return int(line.split()[1]) / 1024
     raise RuntimeError("/proc/self/status has no VmRSS line")
+
+
+def peak_rss_mb() -> float | None:
+    """The largest resident set since the last call (VmHWM, then reset), MB; None if it cannot be reset.
+
+    Writing ``5`` to ``/proc/self/clear_refs`` resets the peak to the current RSS (Linux >= 4.0,
+    ``man 5 proc``); without the reset VmHWM is the peak over the process's life, which says
+    nothing about a window, so None is returned.
+    """
+    with open("/proc/self/status", encoding="ascii") as status:
+        peak = next((int(line.split()[1]) / 1024 for line in status if line.startswith("VmHWM:")), None)
+    try:
+        with open("/proc/self/clear_refs", "w", encoding="ascii") as clear:
+            clear.write("5")
+    except OSError:
+        return None
+    return peak
 
 
 class Monitor:
@@ -58,6 +75,7 @@ class Monitor:
         self._tripped_since: float | None = None
         self._stuck_key: tuple[int, int] | None = None
         self._next_sample = 0.0
+        peak_rss_mb()  # the first window starts now
         self.accepted_after_rearms: list[int] = []  # filled at the end of the run
 
     def run(self) -> None:
@@ -79,10 +97,11 @@ class Monitor:
         sample = Sample(round(t, 1), rss_mb(), traced, self._observer.results, self._observer.valid,
                         frames.acquired if frames else 0, frames.processed if frames else 0,
                         frames.dropped if frames else 0, self._scheduler.injected, self._runner.crashes,
-                        self._runner.restarts)
+                        self._runner.restarts, peak_rss_mb())
         self.samples.append(sample)
         if not self._args.json:
-            print(f"soak: t {sample.t_s:6.0f} s  RSS {sample.rss_mb:7.1f} MB  results {sample.results:6d} "
+            peak = "-" if sample.peak_mb is None else f"{sample.peak_mb:.1f}"
+            print(f"soak: t {sample.t_s:6.0f} s  RSS {sample.rss_mb:7.1f} MB  peak {peak} MB  results {sample.results:6d} "
                   f"({sample.valid} valid)  faults {sample.faults}  crashes {sample.crashes}", file=sys.stderr)
 
     def _watch(self, t: float) -> None:

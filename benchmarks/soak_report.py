@@ -32,7 +32,11 @@ _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 @dataclass(frozen=True)
 class Sample:
-    """One sample: time since start (s), VmRSS (MB), traced Python memory (MB, with --tracemalloc), counts."""
+    """One sample: time since start (s), VmRSS (MB), traced Python memory (MB, with --tracemalloc), counts.
+
+    ``peak_mb`` is the largest resident set since the previous sample (VmHWM, reset after each
+    sample through ``/proc/self/clear_refs``), None where the kernel does not allow the reset.
+    """
 
     t_s: float
     rss_mb: float
@@ -45,6 +49,7 @@ class Sample:
     faults: int
     crashes: int
     restarts: int
+    peak_mb: float | None = None
 
 
 @dataclass(frozen=True)
@@ -63,10 +68,19 @@ class RssVerdict:
     traced_slope_mb_per_min: float | None = None
     station_run: int = 1
     station_runs: int = 1
+    measure: str = "rss"
 
 
-def rss_verdict(samples: list[Sample], warmup_s: float, tolerance_pct: float = 5.0) -> RssVerdict:
-    """Fit RSS against time over the samples after ``warmup_s`` of the last station; flat if all within tolerance.
+def rss_verdict(samples: list[Sample], warmup_s: float, tolerance_pct: float = 5.0,
+                measure: str = "rss") -> RssVerdict:
+    """Fit memory against time over the samples after ``warmup_s`` of the last station; flat if all within tolerance.
+
+    ``measure`` is ``"rss"`` (VmRSS at each sample) or ``"peak"`` (the largest RSS in each
+    sample's window, ``Sample.peak_mb``; falls back to ``"rss"`` when a sample has none). The
+    station's working set swings by its per-set arrays (~100 MB on the default station) within
+    a cycle, so an instantaneous sample lands anywhere in that swing once freed memory goes back
+    to the system; the peak per window is the memory the station needs and is what a leak or
+    a fragmenting heap makes grow.
 
     Only the last station's samples count (``Sample.restarts`` numbers the stations): a rebuilt
     station allocates a new heap (about 50 MB of arrays on the default station) while the
@@ -81,18 +95,21 @@ def rss_verdict(samples: list[Sample], warmup_s: float, tolerance_pct: float = 5
     """
     station = samples[-1].restarts if samples else 0
     late = [s for s in samples if s.t_s >= warmup_s and s.restarts == station]
+    if measure == "peak" and any(s.peak_mb is None for s in late):
+        measure = "rss"
     if len(late) < 2:
         nan = float("nan")
         return RssVerdict(len(late), warmup_s, nan, nan, nan, nan, nan, tolerance_pct, False, None, station + 1,
-                          station + 1)
+                          station + 1, measure)
     t = np.array([s.t_s for s in late]) / 60.0
-    rss = np.array([s.rss_mb for s in late])
+    rss = np.array([s.peak_mb if measure == "peak" else s.rss_mb for s in late], dtype=float)
     mean = float(rss.mean())
     deviation = float(np.max(np.abs(rss - mean)) / mean * 100.0)
     traced = [s.traced_mb for s in late]
     traced_slope = float(np.polyfit(t, np.array(traced), 1)[0]) if None not in traced else None
     return RssVerdict(len(late), warmup_s, float(np.polyfit(t, rss, 1)[0]), mean, float(rss[0]), float(rss[-1]),
-                      deviation, tolerance_pct, deviation <= tolerance_pct, traced_slope, station + 1, station + 1)
+                      deviation, tolerance_pct, deviation <= tolerance_pct, traced_slope, station + 1, station + 1,
+                      measure)
 
 
 @dataclass(frozen=True)
@@ -197,8 +214,13 @@ def _by_kind(windows: list[Window]) -> dict[str, dict[str, int]]:
 
 
 def verdict_json(run: dict[str, Any], samples: list[Sample], rss: RssVerdict, windows: list[Window],
-                 failures: dict[str, list[str]], sites: list[GrowthSite] | None) -> dict[str, Any]:
-    """Everything the soak measured, as one JSON-ready object (``targets`` says what held)."""
+                 failures: dict[str, list[str]], sites: list[GrowthSite] | None,
+                 rss_instant: RssVerdict | None = None) -> dict[str, Any]:
+    """Everything the soak measured, as one JSON-ready object (``targets`` says what held).
+
+    ``rss`` is the verdict the target is judged on (the peak per window where the kernel gives
+    it); ``rss_instant`` the same fit over the instantaneous samples, reported beside it.
+    """
     faults = [w for w in windows if w.index >= 0]
     unaccounted = [w.index for w in faults if any(p.startswith("UNACCOUNTED") for p in fault_problems(w))]
     exceptions = len(failures["thread_exceptions"]) + len(failures["station_crashes"])
@@ -210,6 +232,7 @@ def verdict_json(run: dict[str, Any], samples: list[Sample], rss: RssVerdict, wi
     targets = {"rss_flat": rss.flat, "faults_accounted": not unaccounted, "no_unhandled_exceptions": exceptions == 0,
                "no_station_failures": station_failures == 0}
     return {"type": "soak", "run": run, "samples": [asdict(s) for s in samples], "rss": asdict(rss),
+            "rss_instant": None if rss_instant is None else asdict(rss_instant),
             "faults": [w.to_json() | {"problems": fault_problems(w)} for w in faults],
             "baseline": windows[0].to_json(), "by_kind": _by_kind(windows), "failures": failures,
             "unaccounted": unaccounted, "unhandled_exceptions": exceptions, "station_failures": station_failures,
@@ -220,17 +243,27 @@ def verdict_json(run: dict[str, Any], samples: list[Sample], rss: RssVerdict, wi
 
 
 def _sample_rows(samples: list[Sample], every_s: float) -> list[str]:
-    rows = ["| t s | RSS MB | traced MB | results | valid | frames acquired / delivered / dropped | faults | "
-            "crashes | restarts |", "|---:|---:|---:|---:|---:|---|---:|---:|---:|"]
+    rows = ["| t s | RSS MB | peak MB | traced MB | results | valid | frames acquired / delivered / dropped | "
+            "faults | crashes | restarts |", "|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|"]
     next_t = 0.0
     for k, s in enumerate(samples):
         if s.t_s + 1e-6 < next_t and k != len(samples) - 1:
             continue
         next_t = s.t_s + every_s
         traced = "-" if s.traced_mb is None else f"{s.traced_mb:.1f}"
-        rows.append(f"| {s.t_s:.0f} | {s.rss_mb:.1f} | {traced} | {s.results} | {s.valid} | "
+        peak = "-" if s.peak_mb is None else f"{s.peak_mb:.1f}"
+        rows.append(f"| {s.t_s:.0f} | {s.rss_mb:.1f} | {peak} | {traced} | {s.results} | {s.valid} | "
                     f"{s.acquired} / {s.delivered} / {s.dropped} | {s.faults} | {s.crashes} | {s.restarts} |")
     return rows
+
+
+def _rss_line(rss: dict[str, Any], role: str) -> str:
+    what = "peak RSS per sample window" if rss["measure"] == "peak" else "RSS at each sample"
+    target = f"target +-{rss['tolerance_pct']:g} %" if role == "judged" else "reported only"
+    return (f"{what} after the {rss['warmup_s']:.0f} s warm-up, over one station's life (station run "
+            f"{rss['station_run']}, {rss['samples']} samples): slope {rss['slope_mb_per_min']:+.3f} MB/min, "
+            f"{rss['first_mb']:.1f} -> {rss['last_mb']:.1f} MB, mean {rss['mean_mb']:.1f} MB, max deviation "
+            f"{rss['max_deviation_pct']:.2f} % ({target})")
 
 
 def _rearm_text(run: dict[str, Any]) -> str:
@@ -264,11 +297,8 @@ def render_text(report: dict[str, Any], samples: list[Sample], windows: list[Win
                   f"{s['bytes_per_result']:.0f} |" for s in report["growth_sites"]]
     traced = "" if rss["traced_slope_mb_per_min"] is None else \
         f"; traced Python memory {rss['traced_slope_mb_per_min']:+.3f} MB/min"
-    lines += ["", "## verdict", f"RSS after the {rss['warmup_s']:.0f} s warm-up, over one station's life (station "
-              f"run {rss['station_run']}, {rss['samples']} samples): slope "
-              f"{rss['slope_mb_per_min']:+.3f} MB/min, {rss['first_mb']:.1f} -> {rss['last_mb']:.1f} MB, mean "
-              f"{rss['mean_mb']:.1f} MB, max deviation {rss['max_deviation_pct']:.2f} % (target +-"
-              f"{rss['tolerance_pct']:g} %){traced}",
+    lines += ["", "## verdict", _rss_line(rss, "judged") + traced,
+              *([_rss_line(report["rss_instant"], "reported")] if report.get("rss_instant") else []),
               f"faults: {sum(not f['skipped'] for f in report['faults'])} injected "
               f"({sum(bool(f['skipped']) for f in report['faults'])} skipped while a station started), "
               f"{len(report['unaccounted'])} unaccounted {report['unaccounted'] or ''}".rstrip(),

@@ -10,7 +10,9 @@ face, stacked so that a lower topic never imports a higher one:
 * then :mod:`~wavestack.pipeline.phase` (PSI, carrier, unwrapping, the measured wavefront, units);
 * then :mod:`~wavestack.pipeline.mapping` (meshes, Laplacians, CSF, QCM and conformal maps);
 * then :mod:`~wavestack.pipeline.fit` (methods, building, the fitter, its store) and
-  :mod:`~wavestack.pipeline.shack_hartmann` (grid, centroids, slopes, reconstruction).
+  :mod:`~wavestack.pipeline.shack_hartmann` (grid, centroids, slopes, reconstruction);
+* beside them, needing nothing but the root: :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
+  dwell grid and surface extension, dwell-time solvers).
 
 Private pieces shared across topics live at this root (``_angles``, ``_checks``).
 """
@@ -77,6 +79,23 @@ from .phase import (
     wavefront_to_surface,
     waves_to_nm,
     waves_to_phase,
+)
+from .polishing import (
+    DwellSolution,
+    GridFrame,
+    MachineLimits,
+    MachineProgram,
+    PlanReport,
+    ProgramRejected,
+    ToolInfluence,
+    check_program,
+    dwell_grid,
+    extend_surface,
+    plan_program,
+    removal_nm,
+    residual_after,
+    solve_dwell_fft,
+    solve_dwell_lsq,
 )
 from .shack_hartmann import (
     Centroider,
@@ -204,4 +223,19 @@ __all__ = [
     "surface_to_wavefront",
     "WavefrontUnits",
     "unsupported_reason",
+    "DwellSolution",
+    "GridFrame",
+    "MachineLimits",
+    "MachineProgram",
+    "PlanReport",
+    "ProgramRejected",
+    "check_program",
+    "plan_program",
+    "ToolInfluence",
+    "dwell_grid",
+    "extend_surface",
+    "removal_nm",
+    "residual_after",
+    "solve_dwell_fft",
+    "solve_dwell_lsq",
 ]

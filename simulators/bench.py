@@ -42,8 +42,9 @@ class FrameTruth:
 
     The optic's truth (a full wavefront map, 8 MB at 1024 x 1024) is not kept per frame: the
     camera keeps the truth of its last 64 frames, and holding 64 maps cost half a gigabyte. It is
-    recomputed on request from the frame's time, which gives the same map as long as the optic's
-    aperture has not changed since; after a change :attr:`optic` is None (unknown, never wrong).
+    recomputed on request from the frame's time, which gives the same map as long as neither the
+    optic's aperture nor its surface (polished by a simulated machine) has changed since; after a
+    change :attr:`optic` is None (unknown, never wrong).
 
     Attributes
     ----------
@@ -55,6 +56,8 @@ class FrameTruth:
         The phase shift the piezo produced, radians.
     aperture_revision : int
         The optic's aperture revision when the frame was rendered.
+    surface_revision : int or None
+        The optic's surface revision when the frame was rendered (None: no surface state).
     """
 
     time_s: float
@@ -64,11 +67,15 @@ class FrameTruth:
     source: TestOptic
     carrier_cycles: tuple[float, float] = (0.0, 0.0)
     vibration_rad: float = 0.0
+    surface_revision: int | None = None
 
     @property
     def optic(self) -> OpticTruth | None:
-        """The optic's truth as rendered in this frame (None if its aperture changed since)."""
+        """The optic's truth as rendered in this frame (None if its aperture or surface changed since)."""
         if self.source.aperture_revision != self.aperture_revision:
+            return None
+        surface = self.source.surface
+        if (None if surface is None else surface.revision) != self.surface_revision:
             return None
         return dataclasses.replace(self.source.truth(self.time_s), phase_shift_rad=self.phase_shift_rad,
                                    vibration_rad=self.vibration_rad, carrier_cycles=self.carrier_cycles)
@@ -105,7 +112,7 @@ class SimulatedInterferometer:
         time_s = device_time_ns * 1e-9
         pixels, truth = self.optic.interferogram(time_s, shift)
         return pixels, FrameTruth(time_s, volts, shift, truth.aperture_revision, self.optic,
-                                  truth.carrier_cycles, truth.vibration_rad)
+                                  truth.carrier_cycles, truth.vibration_rad, truth.surface_revision)
 
 
 class SimulatedShackHartmann:

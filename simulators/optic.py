@@ -47,6 +47,16 @@ with ``carrier = 2 pi (nx * col / width - ny * row / height)`` for ``carrier_cyc
 noise of ``noise_rms`` is added, then the frame is rounded to the nearest count and clipped to
 ``[0, full scale]`` (uint8 for 8 bits, uint16 otherwise).
 
+Surface
+-------
+With ``settings.surface`` set, the optic also owns a height map, :attr:`TestOptic.surface` (a
+:class:`~wavestack.simulators.surface.SurfaceState` built from
+:class:`~wavestack.simulators.surface_settings.SurfaceSettings` on the initial aperture's disk,
+covering the whole frame). The wavefront rendered is then ``W + reflection_factor * heights /
+wavelength_nm``, re-made whenever the surface's revision changes
+(:mod:`~wavestack.simulators.optic_surface`). The surface belongs to the optic: a new aperture
+shows another part of the same heights. Without a surface everything is as before.
+
 Speed. The wavefront is linear in time, ``W(t) = B (c + t d) = W0 + t D`` with ``B`` the basis
 on the aperture pixels, so the two products ``B c`` and ``B d`` are made once per aperture (the
 basis is evaluated in blocks and not kept) and a frame costs a few float32 passes: phase,
@@ -76,6 +86,10 @@ from wavestack.pipeline import mode_list
 from wavestack.simulators._checks import check_image_size, finite_number, read_only
 from wavestack.simulators.aperture_shape import ApertureKind, ApertureShape
 from wavestack.simulators.optic_settings import BitDepth, OpticSettings
+from wavestack.simulators.optic_surface import SurfacePhase, SurfaceView
+from wavestack.simulators.optic_truth import OpticTruth
+from wavestack.simulators.surface import SurfaceState
+from wavestack.simulators.surface_sources import initial_heights_nm
 
 __all__ = ["ApertureKind", "ApertureShape", "BitDepth", "OpticSettings", "OpticTruth", "TestOptic"]
 
@@ -83,49 +97,6 @@ logger = logging.getLogger(__name__)
 
 _BASIS_BLOCK = 1 << 15  # aperture pixels per block when evaluating the basis
 _NOISE_POOL_EXTRA = 1 << 18  # spare noise samples: the random offset of a frame's noise slice
-
-
-@dataclass(frozen=True, eq=False)
-class OpticTruth:
-    """The ground truth behind one frame (or one instant, from :meth:`TestOptic.truth`).
-
-    Attributes
-    ----------
-    time_s : float
-        Time the frame shows, seconds.
-    modes : tuple of (int, int)
-        ``(n, m)`` of each coefficient, Noll order from ``j = 1``.
-    coefficients_waves : ndarray, shape (J,)
-        ``c(t)``, unit-RMS Zernike coefficients over the disk ``pupil_px``, waves (read-only).
-    pupil_px : (float, float, float)
-        The unit disk ``(cx, cy, R)``: centre column, centre row, radius, pixels (module notes).
-    wavefront_waves : ndarray, shape (height, width)
-        ``W`` in waves, NaN outside the aperture; no carrier, shift or vibration (read-only).
-    mask : ndarray of bool, shape (height, width)
-        The rasterised aperture (read-only).
-    aperture : ApertureShape
-        The aperture in force.
-    aperture_revision : int
-        0 for the initial aperture, +1 per :meth:`TestOptic.set_aperture`.
-    phase_shift_rad : float
-        The ``delta`` applied to the frame (0 for :meth:`TestOptic.truth`).
-    vibration_rad : float
-        The piston jitter applied to the frame (0 for :meth:`TestOptic.truth`).
-    carrier_cycles : (float, float)
-        The carrier ``(nx, ny)`` of the frame, fringes across width and height.
-    """
-
-    time_s: float
-    modes: tuple[tuple[int, int], ...]
-    coefficients_waves: NDArray[np.float64]
-    pupil_px: tuple[float, float, float]
-    wavefront_waves: NDArray[np.float64]
-    mask: NDArray[np.bool_]
-    aperture: ApertureShape
-    aperture_revision: int
-    phase_shift_rad: float = 0.0
-    vibration_rad: float = 0.0
-    carrier_cycles: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,6 +113,8 @@ class _Rendering:
     phase_drift: NDArray[np.float32] | None  # 2 pi D, radians per second, 0 outside
     amplitude: NDArray[np.float32]  # modulation counts inside, 0 outside
     offset: NDArray[np.float32]  # background counts inside, halo counts outside
+    index: NDArray[np.intp] | None = None  # with a surface: flat indices of the aperture pixels
+    base_phase: NDArray[np.float64] | None = None  # with a surface: 2 pi W0 + carrier there, not wrapped
 
 
 class TestOptic:
@@ -156,13 +129,15 @@ class TestOptic:
     Raises
     ------
     ValueError
-        If the size is invalid or the aperture covers no pixel of the frame.
+        If the size is invalid or the aperture covers no pixel of the frame; an
+        :class:`~wavestack.pipeline.InputError` naming the surface's map file if it cannot be read.
 
     Notes
     -----
     Deterministic: two optics with the same settings, size and call sequence render identical
     frames. Thread-safe: frames may be rendered from a camera thread while another thread
-    changes the aperture (a frame uses one aperture throughout).
+    changes the aperture or polishes the surface (a frame uses one aperture and one surface
+    revision throughout).
     """
 
     __test__ = False  # a library class, not a pytest test class, despite its name
@@ -187,6 +162,11 @@ class TestOptic:
             pool = self._rng.standard_normal(pixels + _NOISE_POOL_EXTRA, dtype=np.float32)
             pool *= np.float32(settings.noise_rms * settings.full_scale)
             self._noise = read_only(pool)
+        self._surface: SurfacePhase | None = None
+        if settings.surface is not None:
+            heights = initial_heights_nm(settings.surface, settings.aperture.mask(height, width))
+            state = SurfaceState(heights, settings.surface.pixel_mm)
+            self._surface = SurfacePhase(state, settings.surface.waves_per_nm)
         self._rendering = self._prepare(settings.aperture, revision=0)
 
     # ----------------------------------------------------------------------------- properties
@@ -222,6 +202,11 @@ class TestOptic:
         return self._rendering.pupil
 
     @property
+    def surface(self) -> SurfaceState | None:
+        """The optic's surface height map (None when ``settings.surface`` is None)."""
+        return None if self._surface is None else self._surface.state
+
+    @property
     def mask(self) -> NDArray[np.bool_]:
         """The rasterised current aperture, shape (height, width), read-only."""
         return self._rendering.mask
@@ -238,7 +223,7 @@ class TestOptic:
         """Change the aperture mid-run; the next frame is rendered on the new one.
 
         The basis products are recomputed on the new aperture and its own circumscribing disk;
-        the coefficients keep their values (module notes).
+        the coefficients keep their values (module notes); the surface stays as it is.
 
         Parameters
         ----------
@@ -284,6 +269,10 @@ class TestOptic:
         phase_drift = None
         if len(maps) > 1:
             phase_drift = read_only((2.0 * np.pi * np.where(mask, maps[1], 0.0)).astype(np.float32))
+        index = base_phase = None
+        if self._surface is not None:
+            index = np.flatnonzero(mask)
+            base_phase = 2.0 * np.pi * products[:, 0] + (carrier.reshape(-1)[index] if np.ndim(carrier) else carrier)
         scale = settings.full_scale
         amplitude = np.where(mask, np.float32(settings.modulation * scale), np.float32(0.0))
         offset = np.where(mask, np.float32(settings.background * scale), np.float32(settings.halo * scale))
@@ -291,7 +280,7 @@ class TestOptic:
             shape=shape, revision=revision, mask=read_only(mask), pupil=(cx, cy, radius),
             wavefront=maps[0], wavefront_drift=maps[1] if len(maps) > 1 else None,
             phase=read_only(phase), phase_drift=phase_drift,
-            amplitude=read_only(amplitude), offset=read_only(offset),
+            amplitude=read_only(amplitude), offset=read_only(offset), index=index, base_phase=base_phase,
         )
 
     # ----------------------------------------------------------------------------- frames
@@ -308,7 +297,9 @@ class TestOptic:
         -------
         OpticTruth
         """
-        return self._truth(self._rendering, finite_number(time_s, "time_s"), 0.0, 0.0, (0.0, 0.0))
+        t = finite_number(time_s, "time_s")
+        rendering = self._rendering
+        return self._truth(rendering, self._surface_view(rendering), t, 0.0, 0.0, (0.0, 0.0))
 
     def interferogram(self, time_s: float, phase_shift_rad: float = 0.0) -> tuple[NDArray, OpticTruth]:
         """Render one interferogram.
@@ -335,12 +326,13 @@ class TestOptic:
             if settings.vibration_rms_rad > 0 and settings.vibration_hz == 0:
                 jitter = float(self._rng.standard_normal()) * settings.vibration_rms_rad
             start = 0 if self._noise is None else int(self._rng.integers(0, _NOISE_POOL_EXTRA + 1))
+        view = self._surface_view(rendering)
         vibration = jitter
         if settings.vibration_rms_rad > 0 and settings.vibration_hz > 0:
             vibration = math.sqrt(2.0) * settings.vibration_rms_rad * math.sin(
                 2.0 * math.pi * settings.vibration_hz * t + self._vibration_phase
             )
-        values = rendering.phase + np.float32(shift + vibration)
+        values = (rendering.phase if view is None else view.phase) + np.float32(shift + vibration)
         if rendering.phase_drift is not None:
             values += np.float32(t) * rendering.phase_drift
         np.cos(values, out=values)
@@ -351,13 +343,22 @@ class TestOptic:
         np.clip(values, 0.0, settings.full_scale, out=values)
         np.rint(values, out=values)
         frame = values.astype(np.uint8 if settings.bit_depth == 8 else np.uint16)
-        truth = self._truth(rendering, t, shift, vibration, settings.carrier_cycles)
+        truth = self._truth(rendering, view, t, shift, vibration, settings.carrier_cycles)
         return frame, truth
 
+    def _surface_view(self, rendering: _Rendering) -> SurfaceView | None:
+        """The phase and wavefront with the current surface on ``rendering``'s aperture (None: no surface)."""
+        if self._surface is None:
+            return None
+        assert rendering.index is not None and rendering.base_phase is not None  # made with the surface
+        return self._surface.view(rendering.revision, rendering.index, rendering.base_phase, rendering.phase,
+                                  rendering.wavefront)
+
     def _truth(
-        self, rendering: _Rendering, t: float, shift: float, vibration: float, carrier: tuple[float, float]
+        self, rendering: _Rendering, view: SurfaceView | None, t: float, shift: float, vibration: float,
+        carrier: tuple[float, float],
     ) -> OpticTruth:
-        wavefront = rendering.wavefront
+        wavefront = rendering.wavefront if view is None else view.wavefront
         if rendering.wavefront_drift is not None and t != 0.0:
             wavefront = read_only(wavefront + t * rendering.wavefront_drift)
         return OpticTruth(
@@ -372,4 +373,6 @@ class TestOptic:
             phase_shift_rad=shift,
             vibration_rad=vibration,
             carrier_cycles=(float(carrier[0]), float(carrier[1])),
+            surface_revision=None if view is None else view.surface_revision,
+            surface_nm=None if view is None else view.heights_nm,
         )

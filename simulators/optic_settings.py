@@ -1,4 +1,4 @@
-"""Settings of the simulated test optic: its wavefront, fringes, levels, noise and camera depth.
+"""Settings of the simulated test optic: its wavefront, surface, fringes, levels, noise and camera depth.
 
 :class:`OpticSettings` is what :class:`~wavestack.simulators.optic.TestOptic` is built from; the
 meaning of the coefficients and the intensity model are described in
@@ -12,6 +12,7 @@ from typing import Literal
 
 from wavestack.simulators._checks import check_bit_depth, check_seed, finite_number, nonnegative_number, number_pair
 from wavestack.simulators.aperture_shape import ApertureShape
+from wavestack.simulators.surface_settings import SurfaceSettings
 
 BitDepth = Literal[8, 12, 16]
 
@@ -49,6 +50,9 @@ class OpticSettings:
         Bits per pixel; frames are uint8 for 8, uint16 otherwise.
     seed : int
         Seed of the noise, the vibration phase and the jitter draws.
+    surface : SurfaceSettings or None
+        The optic's surface as a height map that polishing can change (its wavefront part adds
+        to ``zernike_waves``); None: no surface, the wavefront is the Zernike terms alone.
 
     Raises
     ------
@@ -68,6 +72,7 @@ class OpticSettings:
     vibration_hz: float = 0.0
     bit_depth: BitDepth = 12
     seed: int = 0
+    surface: SurfaceSettings | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.aperture, ApertureShape):
@@ -88,6 +93,8 @@ class OpticSettings:
             nonnegative_number(getattr(self, name), name)
         check_bit_depth(self.bit_depth)
         check_seed(self.seed)
+        if self.surface is not None and not isinstance(self.surface, SurfaceSettings):
+            raise ValueError(f"surface: expected SurfaceSettings or None, got {type(self.surface).__name__}")
 
     @property
     def full_scale(self) -> int:

@@ -6,7 +6,13 @@
 - :mod:`.transport`: one pymodbus client with typed errors and capped reconnect back-off.
 - :mod:`.commands`: command limits and the command the machine holds (pure bookkeeping).
 - :mod:`.gate`: when the PLC may get a command (pure).
+- :mod:`.jobs`: machine state, reason codes, job limits and the job-id ledger (pure).
+- :mod:`.job_file`: the job file, written atomically with its CRC-32.
+- :mod:`.job_control`: the link's job verbs (read the machine, load, start, abort).
 - :mod:`.driver`: :class:`PolishingLink`, heartbeat, command handshake, self-check, re-arm.
+
+The command block publishes the measured terms for the machine's display; removal happens only
+through jobs.
 """
 
 from __future__ import annotations
@@ -24,6 +30,10 @@ from wavestack.drivers.plc.codec import (
 )
 from wavestack.drivers.plc.commands import CommandLimits, CommandRefused
 from wavestack.drivers.plc.driver import HeartbeatEchoStale, PlcNotReady, PolishingLink
+from wavestack.drivers.plc.job_control import JobNotReady, JobRejected
+from wavestack.drivers.plc.job_file import JobFile, JobReceipt, encode_job_file, job_file_name, used_job_ids, write_job_file
+from wavestack.drivers.plc.jobs import (JobAction, JobLimits, JobReason, JobRefused, JobSummary, MachineState,
+                                        MachineStatus, decode_machine)
 from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused
 from wavestack.drivers.plc.status import CommandAck, MachineOutputs, PlcStatus, StatusBit, decode_outputs, decode_status
 from wavestack.drivers.plc.transport import LinkTiming, PlcRefused
@@ -34,6 +44,17 @@ __all__ = [
     "CommandLimits",
     "CommandRefused",
     "HeartbeatEchoStale",
+    "JobAction",
+    "JobFile",
+    "JobLimits",
+    "JobNotReady",
+    "JobReason",
+    "JobReceipt",
+    "JobRefused",
+    "JobRejected",
+    "JobSummary",
+    "MachineState",
+    "MachineStatus",
     "LinkTiming",
     "MachineOutputs",
     "PlcNotReady",
@@ -47,11 +68,16 @@ __all__ = [
     "WriteRefused",
     "decode_float32",
     "decode_float32_array",
+    "decode_machine",
     "decode_outputs",
     "decode_status",
     "decode_uint32",
     "encode_float32",
     "encode_float32_array",
+    "encode_job_file",
     "encode_uint32",
+    "job_file_name",
     "round_to_float32",
+    "used_job_ids",
+    "write_job_file",
 ]

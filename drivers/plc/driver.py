@@ -13,6 +13,7 @@ pymodbus ``ModbusTcpClient``) and adds what a closed loop needs from a PLC link:
   while it cannot be); an unknown held command is read back from the output block;
 - command limits (:class:`CommandLimits`: ``|removal|`` and the step from the held command), checked
   before the wire (:class:`CommandRefused`); :meth:`PolishingLink.restrict` only tightens them;
+- jobs (:mod:`.job_control`): read the machine block, load and start a job file, behind the same gate;
 - a start-up self-check of the float32 byte order that fails closed, and a write allow-list
   (:meth:`RegisterMap.check_write`) enforced before anything reaches the wire;
 - typed errors (:mod:`wavestack.drivers.errors`) naming unit, register and function code:
@@ -29,7 +30,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Sequence
 from types import TracebackType
 
 import numpy as np
@@ -39,7 +39,10 @@ from wavestack.drivers.errors import DeviceTimeout, ProtocolError
 from wavestack.drivers.plc.commands import CommandLedger, CommandLimits, CommandRefused
 from wavestack.drivers.plc.gate import (HeartbeatEchoStale, PlcNotReady, command_refusal, decode_self_check,
                                        echo_lag_error, no_scan_since, not_ready)
-from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused, registers_fit
+from wavestack.drivers.plc.job_control import JobControl
+from wavestack.drivers.plc.jobs import JobLedger, JobLimits
+from wavestack.drivers.plc.raw_access import RawAccess
+from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap
 from wavestack.drivers.plc.status import (
     CommandAck,
     MachineOutputs,
@@ -58,8 +61,11 @@ _log = logging.getLogger(__name__)
 _WATCHDOG_EXCEPTION = 4
 
 
-class PolishingLink:
+class PolishingLink(JobControl, RawAccess):
     """Modbus/TCP link to the polishing-station PLC.
+
+    Commands publish the measured terms for the machine's display; removal happens only through
+    jobs (:mod:`.job_control`). Raw register access for commissioning: :mod:`.raw_access`.
 
     Parameters
     ----------
@@ -75,6 +81,8 @@ class PolishingLink:
     monitor
         An operator's second client (``wavestack plc status|rearm``) while a station runs: it never
         writes the heartbeat (that would disturb the station's echo) and never sends a command.
+    job_limits
+        Limits every job must meet before the wire; None: loads are refused until :meth:`restrict_jobs`.
 
     Notes
     -----
@@ -83,7 +91,8 @@ class PolishingLink:
     """
 
     def __init__(self, host: str, port: int, register_map: RegisterMap, timing: LinkTiming | None = None, *,
-                 command_limits: CommandLimits | None = None, monitor: bool = False) -> None:
+                 command_limits: CommandLimits | None = None, monitor: bool = False,
+                 job_limits: JobLimits | None = None) -> None:
         if not 0 < port <= 65535:
             raise ValueError(f"port must be 1..65535, got {port}")
         self._map = register_map
@@ -101,6 +110,8 @@ class PolishingLink:
         self._sent_commands: dict[int, tuple[int, ...]] = {}
         self._limits = command_limits
         self._ledger = CommandLedger()
+        self._jobs = JobLedger()
+        self._job_limits = job_limits
 
     # ----------------------------------------------------------------------------- public API
     @property
@@ -309,30 +320,6 @@ class PolishingLink:
                 self._send_heartbeat(deadline)
             return self._read_status(deadline)
 
-    def read_registers(self, address: int, count: int, timeout_s: float) -> list[int]:
-        """Raw read of ``count`` registers with the configured read function code (diagnostics)."""
-        deadline = deadline_after(timeout_s)
-        with self._lock:
-            self._transport.ensure_connected(deadline)
-            return self._transport.read(address, count, self._map.status.read_function, deadline)
-
-    def write_registers(self, address: int, values: Sequence[int], timeout_s: float) -> None:
-        """Raw write inside the heartbeat or re-arm register (commissioning); WriteRefused elsewhere, before the wire.
-
-        The command block is refused too: a removal goes through :meth:`send_removal`, its gate and limits.
-        """
-        values = list(values)
-        if not values or not registers_fit(values):
-            raise ValueError(f"{self._device}: values must be 1..123 integers 0..65535, got {values!r}")
-        block = self._map.check_write(address, len(values), self._write_function_for(address))
-        if block.name == "command":
-            raise WriteRefused(self._device, f"refusing a raw write to register {address}: the command block is "
-                               "written only by send_removal (the readiness gate and the command limits)")
-        deadline = deadline_after(timeout_s)
-        with self._lock:
-            self._transport.ensure_connected(deadline)
-            self._write(address, values, block.write_function or 16, deadline)
-
     def close(self) -> None:
         """Close the connection; idempotent. A later call reconnects."""
         with self._lock:
@@ -347,12 +334,6 @@ class PolishingLink:
         self.close()
 
     # ----------------------------------------------------------------------------- internals
-    def _write_function_for(self, address: int) -> int:
-        for block in self._map.blocks():
-            if block.writable and block.contains(address):
-                return block.write_function or 16
-        return 16
-
     def _echo_lag_error(self, status: PlcStatus) -> HeartbeatEchoStale | None:
         return echo_lag_error(self._device, self._beat, status, self._timing.heartbeat_echo_max_lag,
                               self._map.status.start + 2)

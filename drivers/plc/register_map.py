@@ -3,9 +3,9 @@
 Every address the driver touches is named here, as frozen values built from the configuration, so
 a register map is checked once (no overlaps, counts that fit one Modbus request, function codes that
 make sense) and the driver never writes a literal address. The host may write only three places:
-the heartbeat register, the re-arm register and the command block (whole, in one request), each
-with its configured function code; :meth:`RegisterMap.check_write` refuses anything else before a
-byte goes on the wire.
+the heartbeat register, the re-arm register, the command block and the job block (each block whole,
+in one request), each with its configured function code; :meth:`RegisterMap.check_write` refuses
+anything else before a byte goes on the wire.
 
 Layout of the blocks (``n`` = number of removal terms, ``(count - 2) / 2``):
 
@@ -18,6 +18,13 @@ Layout of the blocks (``n`` = number of removal terms, ``(count - 2) / 2``):
   removal amplitudes in nm (one per Zernike term, in the station's term order);
 - outputs (``2 + 2 n``, read-only): uint16 spindle enable, uint16 active command id, ``n`` float32
   removal set points in nm. The watchdog zeroes this block.
+- job (8, optional, FC16 whole): uint16 action (1 load, 2 start, 3 abort), uint16 job id, uint32
+  CRC-32 of the job file's body, uint32 point count, float32 total dwell s (see :mod:`.jobs`);
+- machine (7, optional, read-only): uint16 state, uint16 reason, uint16 job id, uint32 points done,
+  uint32 point count.
+
+The command block keeps publishing the measured terms for the machine's display; removal happens
+only through jobs (job file + job block).
 """
 
 from __future__ import annotations
@@ -31,7 +38,9 @@ from numpy.typing import ArrayLike
 
 from wavestack.drivers._checks import is_integral_in
 from wavestack.drivers.errors import LimitError
-from wavestack.drivers.plc.codec import WORD_ORDERS, WordOrder, encode_float32_array, round_to_float32
+from wavestack.drivers.plc.codec import (WORD_ORDERS, WordOrder, encode_float32, encode_float32_array, encode_uint32,
+                                         round_to_float32)
+from wavestack.drivers.plc.jobs import JOB_BLOCK_COUNT, MACHINE_BLOCK_COUNT, MAX_JOB_ID, JobAction
 
 __all__ = [
     "COMMAND_HEADER_COUNT",
@@ -72,7 +81,8 @@ class RegisterBlock:
     Attributes
     ----------
     name
-        ``"self_check"``, ``"heartbeat"``, ``"rearm"``, ``"status"``, ``"command"`` or ``"output"``.
+        ``"self_check"``, ``"heartbeat"``, ``"rearm"``, ``"status"``, ``"command"``, ``"output"``,
+        ``"job"`` or ``"machine"``.
     start
         Address of the first register (0-based protocol address, as on the wire).
     count
@@ -133,6 +143,8 @@ class RegisterMap:
         The constant the self-check block must decode to.
     self_check, heartbeat, rearm, status, command, output
         The blocks (see the module docstring for their layouts).
+    job, machine
+        The job block and the machine-state block, both or neither (None: a PLC without jobs).
     """
 
     unit_id: int
@@ -143,6 +155,8 @@ class RegisterMap:
     status: RegisterBlock
     command: RegisterBlock
     output: RegisterBlock
+    job: RegisterBlock | None = None
+    machine: RegisterBlock | None = None
 
     def __post_init__(self) -> None:
         if not 0 <= self.unit_id <= 255:
@@ -154,7 +168,10 @@ class RegisterMap:
         except ValueError:
             raise ValueError(f"self_check_value must lie within the float32 range (|x| <= 3.4e38) that the "
                              f"self-check block holds, got {self.self_check_value!r}") from None
-        expected = {"self_check": 2, "heartbeat": 1, "rearm": 1, "status": STATUS_COUNT}
+        expected = {"self_check": 2, "heartbeat": 1, "rearm": 1, "status": STATUS_COUNT, "job": JOB_BLOCK_COUNT,
+                    "machine": MACHINE_BLOCK_COUNT}
+        if (self.job is None) != (self.machine is None):
+            raise ValueError("the job block and the machine block come together: configure both or neither")
         for block in self.blocks():
             if not (0 <= block.start and block.stop <= 65536 and block.count >= 1):
                 raise ValueError(f"{block.name} block [{block.start}, {block.count}] leaves the address range 0..65535")
@@ -173,12 +190,13 @@ class RegisterMap:
         if self.command.count > MAX_WRITE_COUNT:
             raise ValueError(f"command block: {self.command.count} registers exceed one FC16 write ({MAX_WRITE_COUNT})")
         for block, codes in ((self.heartbeat, _SINGLE_WRITE_FUNCTIONS), (self.rearm, _SINGLE_WRITE_FUNCTIONS),
-                             (self.command, _BLOCK_WRITE_FUNCTIONS)):
+                             (self.command, _BLOCK_WRITE_FUNCTIONS), *(((self.job, _BLOCK_WRITE_FUNCTIONS),)
+                                                                      if self.job is not None else ())):
             if block.write_function not in codes:
                 raise ValueError(f"{block.name} block: write function code must be one of {codes}, "
                                  f"got {block.write_function}")
-        for block in (self.self_check, self.status, self.output):
-            if block.writable:
+        for block in (self.self_check, self.status, self.output, self.machine):
+            if block is not None and block.writable:
                 raise ValueError(f"{block.name} block must be read-only")
         ordered = sorted(self.blocks(), key=lambda b: b.start)
         for first, second in zip(ordered, ordered[1:]):
@@ -205,6 +223,8 @@ class RegisterMap:
         self_check_word_order: WordOrder | None = None,
         command_word_order: WordOrder | None = None,
         output_word_order: WordOrder | None = None,
+        job_register: int | None = None,
+        machine_register: int | None = None,
     ) -> RegisterMap:
         """A register map from configuration values.
 
@@ -224,6 +244,10 @@ class RegisterMap:
             Function codes: reads (3 or 4), heartbeat and re-arm writes (6 or 16), command writes (16).
         self_check_word_order, command_word_order, output_word_order
             Per-block byte order overriding ``word_order`` (None = use ``word_order``).
+        job_register, machine_register
+            Starts of the 8-register job block (written with ``block_write_function``) and the
+            7-register machine block (read-only); both or neither (None: no jobs). Their uint32 and
+            float32 values use ``word_order``.
 
         Raises
         ------
@@ -253,10 +277,20 @@ class RegisterMap:
             command=RegisterBlock("command", command_block[0], command_block[1],
                                   f"uint16 command id, uint16 passes, {terms} removal_nm", read_function,
                                   block_write_function, command_word_order or word_order,
-                                  "takes effect once when the id changes; written in one request"),
+                                  "measured terms for the display (removal only through jobs); once per id; one request"),
             output=RegisterBlock("output", output_block[0], output_block[1],
                                  f"uint16 spindle enable, uint16 active id, {terms} set point nm", read_function,
                                  None, output_word_order or word_order, "machine outputs; the watchdog zeroes them"),
+            job=None if job_register is None else RegisterBlock(
+                "job", job_register, JOB_BLOCK_COUNT,
+                "uint16 action, uint16 job id, uint32 CRC-32, uint32 point count, float32 total dwell s",
+                read_function, block_write_function, word_order,
+                "action 1 load (reads job-NNNNN.wsjob), 2 start, 3 abort; written in one request"),
+            machine=None if machine_register is None else RegisterBlock(
+                "machine", machine_register, MACHINE_BLOCK_COUNT,
+                "uint16 state, uint16 reason, uint16 job id, uint32 points done, uint32 point count",
+                read_function, None, word_order,
+                "state 0 idle, 1 loaded, 2 running, 3 done, 4 aborted, 5 fault; reason code (docs/instruments.md)"),
         )
 
     @property
@@ -271,7 +305,8 @@ class RegisterMap:
 
     def blocks(self) -> tuple[RegisterBlock, ...]:
         """Every block, in address-independent fixed order."""
-        return (self.self_check, self.heartbeat, self.rearm, self.status, self.command, self.output)
+        jobs = (self.job, self.machine) if self.job is not None and self.machine is not None else ()
+        return (self.self_check, self.heartbeat, self.rearm, self.status, self.command, self.output, *jobs)
 
     def check_write(self, address: int, count: int, function_code: int) -> RegisterBlock:
         """The writable block a write falls in, or refuse it.
@@ -286,14 +321,14 @@ class RegisterMap:
         Returns
         -------
         RegisterBlock
-            The heartbeat, re-arm or command block holding the whole write.
+            The heartbeat, re-arm, command or job block holding the whole write.
 
         Raises
         ------
         WriteRefused
             The write is not entirely inside one writable block, does not use that block's
             configured function code (FC6 can only write one register), or covers only part of the
-            command block (the PLC refuses it: a new id would start a command from stale registers).
+            command or job block (the PLC refuses it: a new id would act on stale registers).
         """
         allowed = ", ".join(b.describe() for b in self.blocks() if b.writable)
         what = f"register {address}" if count == 1 else f"registers {address}-{address + count - 1}"
@@ -302,8 +337,8 @@ class RegisterMap:
                 if function_code != block.write_function or (function_code == 6 and count != 1):
                     raise WriteRefused(self.device, f"refusing to write {what} with FC{function_code}: the "
                                        f"{block.name} block is written with FC{block.write_function} only")
-                if block is self.command and (address, count) != (block.start, block.count):
-                    raise WriteRefused(self.device, f"refusing to write {what}: the command block "
+                if block.count > 1 and (address, count) != (block.start, block.count):
+                    raise WriteRefused(self.device, f"refusing to write {what}: the {block.name} block "
                                        f"(registers {block.start}-{block.stop - 1}) is written whole, in one "
                                        f"FC{block.write_function} request")
                 return block
@@ -343,6 +378,37 @@ class RegisterMap:
             raise ValueError("removal_nm must be finite")
         assert self.command.word_order is not None
         return [int(command_id), int(passes), *encode_float32_array(values, self.command.word_order)]
+
+    def encode_job(self, action: JobAction, job_id: int, crc32: int, point_count: int,
+                   total_dwell_s: float) -> list[int]:
+        """The job block's registers for one job action.
+
+        Parameters
+        ----------
+        action
+            LOAD, START or ABORT.
+        job_id
+            1..65535.
+        crc32, point_count
+            Unsigned 32-bit values (the job file's body CRC-32 and its number of points).
+        total_dwell_s
+            Total dwell, s, finite and >= 0 (rounded to float32 on the wire).
+
+        Raises
+        ------
+        ValueError
+            No job block in this map, or a value out of range.
+        """
+        if self.job is None:
+            raise ValueError(f"{self.device}: the register map has no job block (configure job_register)")
+        if not is_integral_in(job_id, 1, MAX_JOB_ID):
+            raise ValueError(f"job_id must be an integer 1..{MAX_JOB_ID} (0 means none), got {job_id!r}")
+        if not (math.isfinite(total_dwell_s) and total_dwell_s >= 0):
+            raise ValueError(f"total_dwell_s must be finite and >= 0, got {total_dwell_s!r}")
+        order = self.job.word_order
+        assert order is not None
+        return [int(JobAction(action)), int(job_id), *encode_uint32(crc32, order), *encode_uint32(point_count, order),
+                *encode_float32(total_dwell_s, order)]
 
     def markdown_table(self) -> str:
         """The map as a Markdown table (address, count, type, access, function codes, meaning)."""

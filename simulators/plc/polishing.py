@@ -17,6 +17,12 @@ With ``passes = 1`` one command removes ``efficiency * (1 +/- spread) * r``. In 
 space a removal may have either sign: removing ``-Z_j`` is a removal map shaped like ``-Z_j``
 plus piston, which a real tool can produce.
 
+Since issue 14 the simulated PLC no longer polishes with commands: removal happens only through
+jobs (:mod:`.machine`), and the command block only publishes the measured terms for the machine's
+display. The PLC therefore calls :meth:`PolishingStation.display`, which checks the command and
+records the displayed terms, and never :meth:`PolishingStation.apply`; ``apply`` stays as the
+standalone coefficient model it was (its own tests use it), changing no surface the camera sees.
+
 A command takes effect once per ``command_id``; applying an id again returns the stored
 :class:`PolishingPass` and leaves the surface alone (the PLC handshake retries rely on it). Only the
 newest :data:`REMEMBERED_COMMANDS` ids are remembered, so memory stays bounded in a long run.
@@ -186,6 +192,8 @@ class PolishingStation:
         self._done: OrderedDict[int, tuple[RemovalCommand, PolishingPass]] = OrderedDict()
         self._last_command_id: int | None = None
         self._passes_applied = 0
+        self._displayed: tuple[int, tuple[float, ...]] | None = None
+        self._displays = 0
 
     # ------------------------------------------------------------------------------ state
     @property
@@ -216,7 +224,32 @@ class PolishingStation:
         """Largest ``|removal_nm|`` per term one command may request, nm."""
         return self._max_removal_nm
 
+    @property
+    def displayed(self) -> tuple[int, tuple[float, ...]] | None:
+        """The last command shown on the machine's display: its id and terms (nm); None before the first."""
+        with self._lock:
+            return self._displayed
+
+    @property
+    def displays(self) -> int:
+        """Commands shown on the display (each accepted command id once)."""
+        with self._lock:
+            return self._displays
+
     # ------------------------------------------------------------------------------ verbs
+    def display(self, command: RemovalCommand) -> None:
+        """Check a command (:meth:`validate`) and show its terms on the display; the surface is unchanged.
+
+        Raises
+        ------
+        ValueError
+            From :meth:`validate`; nothing is shown.
+        """
+        self.validate(command)
+        with self._lock:
+            self._displayed = (int(command.command_id), tuple(command.removal_nm))
+            self._displays += 1
+
     def validate(self, command: RemovalCommand) -> None:
         """Check a command's parameters against the station's ranges.
 

@@ -11,9 +11,15 @@ Rules:
 - the watchdog (:class:`HeartbeatWatchdog`) counts only a *change* of the heartbeat register;
   tripped, it zeroes the outputs and every request but a write of 1 to the re-arm register is
   answered with exception 4;
-- a write that changes the command id (to non-zero) applies the command once to the
-  :class:`PolishingStation`; parameters it refuses answer exception 3 and change nothing; before the
-  first heartbeat or with the e-stop pressed, exception 4; while busy, exception 6;
+- a write that changes the command id (to non-zero) shows the command once on the
+  :class:`PolishingStation`'s display (the measured terms; it removes nothing: removal happens only
+  through jobs); parameters it refuses answer exception 3 and change nothing; before the first
+  heartbeat or with the e-stop pressed, exception 4; while busy, exception 6;
+- a write of the job block (if configured) hands its action to the :class:`PolishingMachine`:
+  LOAD and START answer exception 4 before the first heartbeat or with the e-stop pressed, 6 while
+  busy (a pass, or LOAD while a job runs), 3 for a START or ABORT of a job not loaded; ABORT is
+  always taken. The watchdog tripping, the e-stop and a restart stop a running job (ABORTED);
+- the machine block mirrors the machine's state, reason, job id, points done and point count;
 - the status block holds the status word (bit 0 ready, 1 busy, 2 fault, 3 e-stop, 4 heartbeat
   seen), the last accepted id and the heartbeat echo (frozen by the ``freeze_heartbeat_echo`` fault).
 """
@@ -21,7 +27,6 @@ Rules:
 from __future__ import annotations
 
 import logging
-import struct
 import threading
 from collections import deque
 from dataclasses import dataclass, field
@@ -32,10 +37,17 @@ from pymodbus.constants import ExcCodes
 from pymodbus.simulator import DataType, SimData
 
 from wavestack.simulators.plc.faults import SimFaults
+from wavestack.simulators.plc.job_state import StopReason
+from wavestack.simulators.plc.machine import PolishingMachine
 from wavestack.simulators.plc.polishing import PolishingStation, RemovalCommand
 from wavestack.simulators.plc.watchdog import HeartbeatWatchdog, WatchdogState
+from wavestack.simulators.plc.words import float_to_words, uint32_to_words, words_to_float, words_to_uint32
 
 __all__ = ["HISTORY_LENGTH", "PlcSimLayout", "PolishingPlcProgram", "SimOutputs", "float_to_words", "words_to_float"]
+
+#: Registers of the job block and of the machine block.
+JOB_COUNT, MACHINE_COUNT = 8, 7
+_LOAD, _START, _ABORT = 1, 2, 3
 
 #: Accepted commands the program remembers for tests (the newest; a long run must not grow without bound).
 HISTORY_LENGTH = 10_000
@@ -44,27 +56,6 @@ _log = logging.getLogger(__name__)
 
 _READY, _BUSY, _FAULT, _ESTOP, _HEARTBEAT_SEEN = 1, 2, 4, 8, 16
 _ORDERS = ("ABCD", "CDAB", "BADC", "DCBA")
-
-
-def _swap_bytes(word: int) -> int:
-    return ((word & 0xFF) << 8) | (word >> 8)
-
-
-def float_to_words(value: float, order: str) -> list[int]:
-    """Two registers for a float32 in byte order ``order`` (``A`` = most significant byte)."""
-    bits = struct.unpack(">I", struct.pack(">f", value))[0]
-    high, low = bits >> 16, bits & 0xFFFF
-    return {"ABCD": [high, low], "CDAB": [low, high],
-            "BADC": [_swap_bytes(high), _swap_bytes(low)], "DCBA": [_swap_bytes(low), _swap_bytes(high)]}[order]
-
-
-def words_to_float(words: list[int], order: str) -> float:
-    """The float32 in two registers with byte order ``order``."""
-    first, second = words
-    high, low = {"ABCD": (first, second), "CDAB": (second, first),
-                 "BADC": (_swap_bytes(first), _swap_bytes(second)),
-                 "DCBA": (_swap_bytes(second), _swap_bytes(first))}[order]
-    return float(struct.unpack(">f", struct.pack(">I", (high << 16) | low))[0])
 
 
 @dataclass(frozen=True)
@@ -95,6 +86,12 @@ class PlcSimLayout:
     single_write_function
         Function code of the heartbeat and re-arm writes: 6, or 16 with one register. The command
         block is always written with 16, whole (see :mod:`~wavestack.simulators.plc.access`).
+    job_register, machine_register
+        Starts of the 8-register job block (action, job id, uint32 CRC-32, uint32 point count,
+        float32 total dwell; written whole with 16) and the 7-register read-only machine block
+        (state, reason, job id, uint32 points done, uint32 point count); both or neither.
+    job_word_order
+        Byte order of the 32-bit values in those blocks (None: ``command_word_order``).
     """
 
     unit_id: int
@@ -112,13 +109,19 @@ class PlcSimLayout:
     pass_duration_s: float = 0.0
     read_function: int = 3
     single_write_function: int = 6
+    job_register: int | None = None
+    machine_register: int | None = None
+    job_word_order: str | None = None
 
     def __post_init__(self) -> None:
+        if (self.job_register is None) != (self.machine_register is None):
+            raise ValueError("job_register and machine_register come together: set both or neither")
         if self.read_function not in (3, 4):
             raise ValueError(f"read_function must be 3 or 4, got {self.read_function!r}")
         if self.single_write_function not in (6, 16):
             raise ValueError(f"single_write_function must be 6 or 16, got {self.single_write_function!r}")
-        for order in (self.self_check_word_order, self.command_word_order, self.output_word_order):
+        for order in (self.self_check_word_order, self.command_word_order, self.output_word_order,
+                      self.job_word_order or self.command_word_order):
             if order not in _ORDERS:
                 raise ValueError(f"unknown word order {order!r}; expected one of {_ORDERS}")
         if self.command_block[1] != self.output_block[1] or self.command_block[1] < 4 or self.command_block[1] % 2:
@@ -127,7 +130,9 @@ class PlcSimLayout:
         if self.pass_duration_s < 0:
             raise ValueError(f"pass_duration_s must be >= 0, got {self.pass_duration_s}")
         spans = sorted([(self.self_check_register, 2), (self.heartbeat_register, 1), (self.rearm_register, 1),
-                        (self.status_register, 3), self.command_block, self.output_block])
+                        (self.status_register, 3), self.command_block, self.output_block,
+                        *([(self.job_register, JOB_COUNT), (self.machine_register, MACHINE_COUNT)]
+                          if self.job_register is not None and self.machine_register is not None else [])])
         for (first, count), (second, _) in zip(spans, spans[1:]):
             if second < first + count:
                 raise ValueError(f"register blocks starting at {first} and {second} overlap")
@@ -148,7 +153,20 @@ class PlcSimLayout:
             SimData(self.command_block[0], count=self.command_block[1], values=0, datatype=DataType.REGISTERS),
             SimData(self.output_block[0], count=self.output_block[1], values=0, datatype=DataType.REGISTERS,
                     readonly=True),
+            *([SimData(self.job_register, count=JOB_COUNT, values=0, datatype=DataType.REGISTERS),
+               SimData(self.machine_register, count=MACHINE_COUNT, values=0, datatype=DataType.REGISTERS,
+                       readonly=True)] if self.job_register is not None and self.machine_register is not None else []),
         ]
+
+    @property
+    def has_jobs(self) -> bool:
+        """Whether the map carries the job and machine blocks."""
+        return self.job_register is not None and self.machine_register is not None
+
+    @property
+    def job_order(self) -> str:
+        """Byte order of the 32-bit values in the job and machine blocks."""
+        return self.job_word_order or self.command_word_order
 
 
 @dataclass(frozen=True)
@@ -176,15 +194,20 @@ class PolishingPlcProgram:
         The polishing model commands act on.
     faults
         Fault switches (e-stop, frozen heartbeat echo) the program consults.
+    machine
+        The polishing machine the job block drives (None: job writes answer exception 4).
     """
 
-    def __init__(self, layout: PlcSimLayout, station: PolishingStation, faults: SimFaults) -> None:
+    def __init__(self, layout: PlcSimLayout, station: PolishingStation, faults: SimFaults,
+                 machine: PolishingMachine | None = None) -> None:
         if station.n_terms != layout.n_terms:
             raise ValueError(f"the station has {station.n_terms} terms but the command block carries {layout.n_terms}")
         self.layout = layout
         self.station = station
         self.faults = faults
+        self.machine = machine
         self._lock = threading.Lock()
+        self._job_regs = [0] * JOB_COUNT
         self._watchdog = HeartbeatWatchdog(layout.watchdog_timeout_s)
         self._echo = 0
         self._rearm_value = 0
@@ -277,8 +300,27 @@ class PolishingPlcProgram:
     def _zero_outputs(self) -> SimOutputs:
         return SimOutputs(False, 0, np.zeros(self.layout.n_terms))
 
+    def interlock(self, now: float) -> StopReason | None:
+        """Why a running job must stop now (e-stop, watchdog not running), or None; for the machine's thread."""
+        with self._lock:
+            self._scan(now)
+            if self.faults.estop:
+                return StopReason.ESTOP
+            return None if self._watchdog.state is WatchdogState.RUNNING else StopReason.WATCHDOG
+
+    def power_cycle(self, now: float) -> None:
+        """The PLC program restarts: a running job stops (PLC_RESTART), the watchdog waits for a heartbeat."""
+        if self.machine is not None:
+            self.machine.stop(StopReason.PLC_RESTART)
+        with self._lock:
+            self._watchdog = HeartbeatWatchdog(self.layout.watchdog_timeout_s, self._watchdog.value)
+            self._outputs = self._zero_outputs()
+            self._busy_until = now
+
     def _scan(self, now: float) -> None:
         if self._watchdog.poll(now):
+            if self.machine is not None:
+                self.machine.stop(StopReason.WATCHDOG)
             self._outputs = self._zero_outputs()
             _log.warning("PLC simulator: watchdog tripped (no heartbeat change for %.3f s); outputs zeroed",
                          self.layout.watchdog_timeout_s)
@@ -311,7 +353,32 @@ class PolishingPlcProgram:
                 if refusal is not None:
                     return refusal
             self._command_regs = merged
+        if layout.job_register is not None and layout.job_register in written:
+            regs = [written.get(layout.job_register + i, 0) for i in range(JOB_COUNT)]
+            refusal = self._job_action(regs, now)
+            if refusal is not None:
+                return refusal
+            self._job_regs = regs
         return None
+
+    def _job_action(self, registers: list[int], now: float) -> ExcCodes | None:
+        action, job_id = registers[0], registers[1]
+        if self.machine is None or action not in (_LOAD, _START, _ABORT):
+            return ExcCodes.ILLEGAL_VALUE if self.machine is not None else ExcCodes.DEVICE_FAILURE
+        if action == _ABORT:
+            return None if self.machine.abort(job_id) else ExcCodes.ILLEGAL_VALUE
+        if self.faults.estop or self._watchdog.state is not WatchdogState.RUNNING:
+            _log.warning("PLC simulator: job action %d refused with exception 4 (e-stop or no heartbeat)", action)
+            return ExcCodes.DEVICE_FAILURE
+        if now < self._busy_until or job_id == 0:
+            return ExcCodes.DEVICE_BUSY if job_id else ExcCodes.ILLEGAL_VALUE
+        if action == _START:
+            return None if self.machine.start(job_id) else ExcCodes.ILLEGAL_VALUE
+        order = self.layout.job_order
+        crc = words_to_uint32(registers[2:4], order)
+        count = words_to_uint32(registers[4:6], order)
+        total = words_to_float(registers[6:8], order)
+        return None if self.machine.load(job_id, crc, count, total) else ExcCodes.DEVICE_BUSY
 
     def _accept(self, registers: list[int], now: float) -> ExcCodes | None:
         command_id, passes = registers[0], registers[1]
@@ -324,12 +391,11 @@ class PolishingPlcProgram:
         removal = [words_to_float(registers[i:i + 2], order) for i in range(2, len(registers), 2)]
         command = RemovalCommand(command_id=command_id, removal_nm=tuple(removal), passes=passes)
         try:
-            self.station.validate(command)
+            self.station.display(command)
         except ValueError as error:
             self._fault_latched = True
             _log.warning("PLC simulator: command %d refused with exception 3: %s", command_id, error)
             return ExcCodes.ILLEGAL_VALUE
-        self.station.apply(command)
         self._last_accepted = command_id
         self._accepted.append(command_id)
         self._accepted_removals.append(tuple(removal))
@@ -363,3 +429,15 @@ class PolishingPlcProgram:
         for value in self._outputs.setpoint_nm:
             setpoints.extend(float_to_words(float(value), layout.output_word_order))
         put(layout.output_block[0], [int(self._outputs.spindle_enabled), self._outputs.active_command_id, *setpoints])
+        if layout.job_register is not None and layout.machine_register is not None:
+            put(layout.job_register, self._job_regs)
+            put(layout.machine_register, self._machine_words())
+
+    def _machine_words(self) -> list[int]:
+        if self.machine is None:
+            return [0] * MACHINE_COUNT
+        snap = self.machine.snapshot()
+        order = self.layout.job_order
+        return [int(snap.state), int(snap.reason), snap.job_id, *uint32_to_words(snap.points_done, order),
+                *uint32_to_words(snap.point_count, order)]
+

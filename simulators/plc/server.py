@@ -38,6 +38,7 @@ from pymodbus.simulator import SimDevice
 
 from wavestack.simulators.plc.access import check_request, refusing_request_classes
 from wavestack.simulators.plc.faults import SimFaults
+from wavestack.simulators.plc.machine import PolishingMachine
 from wavestack.simulators.plc.polishing import PolishingStation
 from wavestack.simulators.plc.program import HISTORY_LENGTH, PlcSimLayout, PolishingPlcProgram, SimOutputs
 from wavestack.simulators.plc.watchdog import WatchdogState
@@ -70,6 +71,8 @@ class PlcSimulator:
         Where to listen; port 0 picks a free port (see :attr:`port`).
     clock
         Monotonic clock in seconds (tests may pass their own).
+    machine
+        The polishing machine the job block drives (None: no jobs); :meth:`stop` stops its run.
 
     Attributes
     ----------
@@ -84,9 +87,15 @@ class PlcSimulator:
     """
 
     def __init__(self, layout: PlcSimLayout, station: PolishingStation, *, host: str = "127.0.0.1",
-                 port: int = 0, clock: Callable[[], float] = time.monotonic) -> None:
+                 port: int = 0, clock: Callable[[], float] = time.monotonic,
+                 machine: PolishingMachine | None = None) -> None:
+        if machine is not None and not layout.has_jobs:
+            raise ValueError("a PLC simulator with a machine needs job_register and machine_register in its layout")
         self.faults = SimFaults()
-        self.program = PolishingPlcProgram(layout, station, self.faults)
+        self.program = PolishingPlcProgram(layout, station, self.faults, machine)
+        self.machine = machine
+        if machine is not None:
+            machine.attach_interlock(lambda: self.program.interlock(self._clock()))
         self.layout = layout
         self.station = station
         self._host = host
@@ -147,16 +156,23 @@ class PlcSimulator:
         if thread.is_alive():
             raise TimeoutError(f"PLC simulator thread did not stop within {timeout_s} s")
         self._thread = None
+        if self.machine is not None:
+            self.machine.close(timeout_s)
 
-    def restart(self, downtime_s: float = 0.0, timeout_s: float = 5.0) -> None:
+    def restart(self, downtime_s: float = 0.0, timeout_s: float = 5.0, *, power_cycle: bool = False) -> None:
         """Drop every connection and close the listener; listen again on the same port after ``downtime_s``.
 
         Returns once the listener is closed; the PLC's memory and state are kept (a restart of the
         Modbus service, not a power cycle). Connection attempts during the downtime are refused.
+        With ``power_cycle`` the PLC program restarts too: a running job stops (ABORTED,
+        PLC_RESTART, removal so far kept), the watchdog waits for a heartbeat change, outputs are
+        zero; the machine keeps its log of used job ids (retentive memory).
         """
         loop = self._loop
         if loop is None or self._thread is None:
             raise RuntimeError("the PLC simulator is not running")
+        if power_cycle:
+            self.program.power_cycle(self._clock())
         asyncio.run_coroutine_threadsafe(self._restart(downtime_s), loop).result(timeout_s)
 
     def wait_listening(self, timeout_s: float) -> bool:

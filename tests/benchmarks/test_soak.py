@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from dataclasses import replace
+
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -61,6 +63,21 @@ def test_rss_is_judged_over_the_last_station_only() -> None:
     verdict = rss_verdict(samples, warmup_s=60.0)
     assert verdict.flat and verdict.station_run == 2 and verdict.samples == 60
     assert not rss_verdict(_samples(lambda t: 400.0 if t < 300 else 450.0), warmup_s=60.0).flat
+
+
+def test_the_peak_per_window_is_judged_where_every_sample_has_one() -> None:
+    # instantaneous RSS swings +-60 MB with the set's arrays (not flat); the window peaks stay at 500 MB (flat)
+    samples = [replace(s, rss_mb=440.0 + (60.0 if k % 2 else -60.0), peak_mb=500.0 + (k % 3))
+               for k, s in enumerate(_samples(lambda t: 0.0))]
+    assert rss_verdict(samples, warmup_s=60.0, measure="peak").flat
+    assert rss_verdict(samples, warmup_s=60.0, measure="peak").measure == "peak"
+    assert not rss_verdict(samples, warmup_s=60.0, measure="rss").flat
+    # a peak that creeps is caught as a creep
+    creeping = [replace(s, peak_mb=500.0 + 10.0 * s.t_s / 60.0) for s in samples]  # 510 -> 599 MB: +-8 %
+    assert not rss_verdict(creeping, warmup_s=60.0, measure="peak").flat
+    # one sample without a peak (the kernel refused the reset): judged on RSS, and it says so
+    fallback = rss_verdict([replace(samples[-1], peak_mb=None), *samples[:-1]], warmup_s=0.0, measure="peak")
+    assert fallback.measure == "rss" and not fallback.flat
 
 
 LIMITS = TripLimits(watchdog_timeout_s=2.0, heartbeat_period_s=0.5, io_timeout_s=0.5)  # the default station

@@ -76,3 +76,44 @@ def test_sim_plc_refuses_a_remote_host_without_allow_remote() -> None:
     assert result.returncode == 2
     assert result.stdout == ""
     assert "--allow-remote" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_sim_plc_with_a_job_folder_runs_a_job_our_link_hands_it(tmp_path) -> None:
+    import time
+
+    import numpy as np
+
+    from wavestack.drivers.plc import JobFile, MachineState, write_job_file
+
+    with _simulator("plc", "--port", "0", "--job-folder", str(tmp_path)) as (process, line):
+        assert line.startswith("listening 127.0.0.1:"), line
+        host, port = line.removeprefix("listening ").rsplit(":", 1)
+        config = load_plc_config(None)
+        with PolishingLink(host, int(port), config.link.register_map(),
+                           job_limits=config.link.job_limits()) as link:
+            link.connect(timeout_s=5.0)
+            link.self_check(timeout_s=5.0)
+            link.heartbeat(timeout_s=5.0)
+            assert link.read_machine(timeout_s=5.0).state is MachineState.IDLE
+            job_id = link.next_job_id()
+            n = 5
+            job = JobFile(job_id, np.linspace(-1.0, 1.0, n), np.zeros(n), np.full(n, 0.01), np.full(n, 50.0), 0.25,
+                          {"kind": "gaussian", "fwhm_mm": 4.0, "peak_rate_nm_s": 1.0}, {"pixels": 1})
+            receipt = write_job_file(tmp_path, job)
+            link.heartbeat(timeout_s=5.0)
+            link.load_job(receipt, job_id)
+            states = []
+            deadline = time.monotonic() + 30.0
+            while time.monotonic() < deadline:
+                link.heartbeat(timeout_s=5.0)
+                status = link.read_machine(timeout_s=5.0)
+                states.append(status.state)
+                if status.state is MachineState.LOADED:
+                    link.start_job(job_id)
+                if status.state in (MachineState.DONE, MachineState.ABORTED, MachineState.FAULT):
+                    break
+                time.sleep(0.05)
+            assert states[-1] is MachineState.DONE, (states, status)
+            assert status.job_id == job_id and status.points_done == n
+        process.send_signal(signal.SIGINT)
+        assert process.wait(timeout=30) == 0

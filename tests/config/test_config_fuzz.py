@@ -33,6 +33,7 @@ from wavestack.config.schema import ConfigError
 from wavestack.config.shack_hartmann import ShackHartmannSettings
 from wavestack.config.station import OutputSettings, StationSettings, parse_station_config
 from wavestack.simulators.bench import PiezoCoupling
+from wavestack.simulators import SurfaceSettings
 from wavestack.simulators.optic import OpticSettings
 from wavestack.simulators.spots import LensletArraySettings
 
@@ -44,7 +45,7 @@ SCHEMAS: dict[tuple[str, ...], type] = {
     ("camera", "simulator"): CameraSimulatorSettings, ("pzt",): PiezoSettings, ("pzt", "simulator"): PiezoSimulatorSettings,
     ("plc",): PlcLinkSettings, ("plc", "simulator", "polishing"): PolishingModelSettings, ("outputs",): OutputSettings,
     ("optic",): OpticSettings, ("bench",): PiezoCoupling, ("shack_hartmann",): ShackHartmannSettings,
-    ("lenslets",): LensletArraySettings,
+    ("lenslets",): LensletArraySettings, ("optic", "surface"): SurfaceSettings,
 }
 SOURCE = "fuzz.toml"
 

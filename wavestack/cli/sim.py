@@ -30,6 +30,8 @@ def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
     plc.add_argument("--port", type=int, default=0, help="TCP port; 0 picks a free one (default)")
     plc.add_argument("--allow-remote", action="store_true",
                      help="allow a non-loopback host (Modbus/TCP has no authentication)")
+    plc.add_argument("--job-folder", type=Path,
+                     help="run a polishing machine that takes its job files from this folder")
 
 
 def _announce(line: str) -> None:
@@ -49,7 +51,8 @@ def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         from wavestack.cli.sim_plc import run_plc_simulator
 
         def runner() -> None:
-            run_plc_simulator(args.config, args.host, args.port, args.allow_remote, _announce, stop)
+            run_plc_simulator(args.config, args.host, args.port, args.allow_remote, _announce, stop,
+                              job_folder=args.job_folder)
     with stop_on_signals(stop):
         runner()
     print(f"wavestack sim {args.device}: stopped", file=sys.stderr)

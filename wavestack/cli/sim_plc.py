@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ipaddress
 import logging
+import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -27,14 +28,15 @@ def is_loopback(host: str) -> bool:
 
 
 def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remote: bool,
-                      announce: Callable[[str], None], stop: threading.Event) -> None:
+                      announce: Callable[[str], None], stop: threading.Event, *,
+                      job_folder: Path | None = None) -> None:
     """Run the PLC simulator until ``stop`` is set.
 
     Parameters
     ----------
     config_path
-        TOML with ``[plc]`` and ``[plc.simulator.polishing]``; None for the built-in defaults
-        (equal to ``config/plc-sim.toml``).
+        TOML with ``[plc]`` and ``[plc.simulator.polishing]``, and ``[plc.simulator.machine]`` for a
+        machine that runs jobs; None for the built-in defaults (equal to ``config/plc-sim.toml``).
     host, port
         Where to listen; port 0 picks a free port.
     allow_remote
@@ -44,6 +46,10 @@ def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remo
         Called once with ``"listening HOST:PORT"`` when the server accepts connections.
     stop
         Set it to stop the server (the CLI sets it on SIGINT/SIGTERM).
+    job_folder
+        Run a polishing machine on this job folder (also without ``[plc.simulator.machine]``: its
+        defaults). The standalone machine polishes no optic: it checks and runs jobs, reporting
+        progress. Without it, a machine runs only if the configuration has that table.
 
     Raises
     ------
@@ -63,12 +69,19 @@ def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remo
     if config.simulator is None:
         raise ConfigError(f"{config.source}: no [plc.simulator] table; the simulator needs the polishing model "
                           "(see config/plc-sim.toml)")
-    simulator = PlcSimulator(config.sim_layout(), config.polishing_station(), host=host, port=port)
+    machine = None
+    if job_folder is not None or config.simulator.machine is not None:
+        if not Path(machine_folder := str(job_folder or config.machine_settings().job_folder)).is_dir():
+            raise ValueError(f"the machine's job folder {machine_folder} does not exist or is not a folder")
+        machine = config.polishing_machine(None, job_folder)
+    simulator = PlcSimulator(config.sim_layout(), config.polishing_station(), host=host, port=port, machine=machine)
     try:
         simulator.start()
     except OSError as error:
         raise ValueError(f"cannot serve the PLC simulator on {host}:{port}: {error}") from None
     try:
+        if machine is not None:  # on stderr: the announced line stays exactly 'listening HOST:PORT' for scripts
+            print(f"wavestack sim plc: polishing machine on job folder {machine.settings.job_folder}", file=sys.stderr)
         announce(f"listening {host}:{simulator.port}")
         while not stop.wait(0.1):
             pass

@@ -12,6 +12,7 @@ from wavestack.config._checks import BIT_DEPTH
 from wavestack.drivers.device_path import DEVICE_PATH_RULE, check_device_path
 from wavestack.config.camera import CameraSettings, CameraSimulatorSettings, parse_camera_config
 from wavestack.config.plc import (
+    MachineModelSettings,
     PlcConfig,
     PlcLinkSettings,
     PlcSimulatorSettings,
@@ -50,7 +51,7 @@ from wavestack.config.station import (
 
 __all__ = [
     "BIT_DEPTH", "CameraSettings", "DEVICE_PATH_RULE", "check_device_path", "CameraSimulatorSettings", "ConfigError", "DEFAULT_CONFIG", "FitSettings",
-    "OutputSettings", "PiezoSettings", "PiezoSimulatorSettings", "PlcConfig", "PlcLinkSettings",
+    "MachineModelSettings", "OutputSettings", "PiezoSettings", "PiezoSimulatorSettings", "PlcConfig", "PlcLinkSettings",
     "PlcSimulatorSettings", "PolishingModelSettings", "ProcessingSettings", "ShackHartmannSettings",
     "StationConfig", "StationSettings", "URL_KINDS", "build_calibration", "build_piezo", "build_simulated_device",
     "device_tables", "load_plc_config", "load_pzt_config", "load_station_config", "load_toml",

@@ -1,14 +1,16 @@
 """Configuration of the polishing-station PLC link and of its simulator (TOML ``[plc]``).
 
 One file describes both ends: ``[plc]`` holds what the driver needs (address, unit id, register
-map, float32 byte orders, function codes, timing) and what the PLC is configured with (watchdog
-timeout); ``[plc.simulator.polishing]`` holds the simulated machine's model. ``config/plc-sim.toml``
+map, float32 byte orders, function codes, timing, the job folder and the job limits) and what the
+PLC is configured with (watchdog timeout); ``[plc.simulator.polishing]`` holds the display model the
+commands are shown on, ``[plc.simulator.machine]`` (optional) the simulated polishing machine that
+runs jobs: its job folder, speed, its own tool and its own limits. ``config/plc-sim.toml``
 is the simulator's file and equals the built-in defaults; ``config/plc-example.toml`` is a commented
 example for a real PLC.
 
 This module is the only place that knows both the driver and the simulator: it turns one checked
 configuration into the driver's :class:`RegisterMap` and :class:`LinkTiming` and into the
-simulator's own :class:`PlcSimLayout` and :class:`PolishingStation`.
+simulator's own :class:`PlcSimLayout`, :class:`PolishingStation` and :class:`PolishingMachine`.
 """
 
 from __future__ import annotations
@@ -21,13 +23,15 @@ from pathlib import Path
 from typing import Any, Literal
 
 from wavestack.config.schema import ConfigError, device_tables, load_toml, parse_section, setting
+from wavestack.drivers.plc.jobs import JobLimits
 from wavestack.drivers.plc.register_map import RegisterMap
 from wavestack.drivers.plc.transport import LinkTiming
+from wavestack.simulators.plc.machine import MachineSimSettings, PolishingMachine, RemovalTarget
 from wavestack.simulators.plc.polishing import PolishingStation
 from wavestack.simulators.plc.program import PlcSimLayout
 
-__all__ = ["PlcConfig", "PlcLinkSettings", "PlcSimulatorSettings", "PolishingModelSettings", "load_plc_config",
-           "parse_plc_config"]
+__all__ = ["MachineModelSettings", "PlcConfig", "PlcLinkSettings", "PlcSimulatorSettings", "PolishingModelSettings",
+           "load_plc_config", "parse_plc_config"]
 
 WordOrderName = Literal["ABCD", "CDAB", "BADC", "DCBA"]
 
@@ -67,6 +71,17 @@ class PlcLinkSettings:
                                      doc="longest reconnect back-off; at most a quarter of watchdog_timeout_s")
     command_retries: int = setting(2, minimum=0, maximum=10, doc="resends of a command after a lost reply")
     heartbeat_echo_max_lag: int = setting(2, minimum=0, maximum=1000, doc="beats the echo may trail")
+    job_register: int | None = setting(300, minimum=0, maximum=65528,
+                                       doc="first of 8 registers: job action, id, CRC-32, points, total dwell")
+    machine_register: int | None = setting(320, minimum=0, maximum=65529,
+                                           doc="first of 7 read-only registers: state, reason, job id, progress")
+    job_folder: str | None = setting(None, doc="where the host writes job files (the machine's share)")
+    job_max_points: int = setting(500_000, minimum=1, maximum=2**32 - 1, doc="most points in one job")
+    job_max_total_dwell_s: float = setting(36_000.0, minimum=0.001, maximum=1e7, doc="longest total dwell, s")
+    job_max_dwell_per_point_s: float = setting(60.0, minimum=0.001, maximum=1e5, doc="longest dwell at a point")
+    job_max_feed_mm_s: float = setting(100.0, minimum=0.001, maximum=1e4, doc="fastest feed between points")
+    job_travel_x_mm: tuple[float, float] = setting((-100.0, 100.0), doc="[lo, hi] machine travel in x, mm")
+    job_travel_y_mm: tuple[float, float] = setting((-100.0, 100.0), doc="[lo, hi] machine travel in y, mm")
 
     @property
     def simulated(self) -> bool:
@@ -98,7 +113,13 @@ class PlcLinkSettings:
             read_function=self.read_function_code, single_write_function=self.single_write_function_code,
             block_write_function=self.command_write_function_code,
             self_check_word_order=self.self_check_word_order, command_word_order=self.command_word_order,
-            output_word_order=self.output_word_order)
+            output_word_order=self.output_word_order, job_register=self.job_register,
+            machine_register=self.machine_register)
+
+    def job_limits(self) -> JobLimits:
+        """The host's job limits (raises ValueError for an empty travel)."""
+        return JobLimits(self.job_max_points, self.job_max_total_dwell_s, self.job_max_dwell_per_point_s,
+                         self.job_max_feed_mm_s, self.job_travel_x_mm, self.job_travel_y_mm)
 
     def link_timing(self) -> LinkTiming:
         """The driver's timing and retry policy."""
@@ -122,10 +143,32 @@ class PolishingModelSettings:
 
 
 @dataclass(frozen=True)
+class MachineModelSettings:
+    """``[plc.simulator.machine]``: the simulated polishing machine (see ``simulators/plc/machine.py``)."""
+
+    job_folder: str | None = setting(None, doc="the machine's job folder; none: [plc] job_folder")
+    time_scale: float = setting(100.0, minimum=0.001, maximum=1e9, doc="simulated seconds per real second")
+    tif_fwhm_mm: float = setting(3.0, minimum=0.001, maximum=1000.0, doc="the tool's nominal FWHM, mm")
+    tif_peak_rate_nm_s: float = setting(10.0, minimum=0.0, maximum=1e6, doc="the tool's nominal peak rate, nm/s")
+    width_error: float = setting(0.0, minimum=-0.9, maximum=1.0, doc="real FWHM / nominal - 1")
+    rate_error: float = setting(0.0, minimum=-0.9, maximum=1.0, doc="real peak rate / nominal - 1")
+    efficiency_spread: float = setting(0.0, minimum=0.0, maximum=0.99, doc="per-point efficiency half-width")
+    noise_nm: float = setting(0.0, minimum=0.0, maximum=1000.0, doc="process noise a job leaves per pixel, nm")
+    seed: int = setting(0, minimum=0, doc="random seed of the machine")
+    max_points: int = setting(500_000, minimum=1, maximum=2**32 - 1, doc="the machine's own point limit")
+    max_total_dwell_s: float = setting(36_000.0, minimum=0.001, maximum=1e7, doc="its total dwell limit, s")
+    max_dwell_per_point_s: float = setting(60.0, minimum=0.001, maximum=1e5, doc="its per-point dwell limit, s")
+    max_feed_mm_s: float = setting(100.0, minimum=0.001, maximum=1e4, doc="its feed limit, mm/s")
+    travel_x_mm: tuple[float, float] = setting((-100.0, 100.0), doc="its travel in x, mm")
+    travel_y_mm: tuple[float, float] = setting((-100.0, 100.0), doc="its travel in y, mm")
+
+
+@dataclass(frozen=True)
 class PlcSimulatorSettings:
     """``[plc.simulator]``: what only the simulator needs."""
 
     polishing: PolishingModelSettings = PolishingModelSettings()
+    machine: MachineModelSettings | None = None
 
 
 @dataclass(frozen=True)
@@ -159,7 +202,36 @@ class PlcConfig:
             output_word_order=link.output_word_order or link.word_order,
             watchdog_timeout_s=link.watchdog_timeout_s,
             read_function=link.read_function_code, single_write_function=link.single_write_function_code,
-            pass_duration_s=self.simulator.polishing.pass_duration_s if self.simulator else 0.0)
+            pass_duration_s=self.simulator.polishing.pass_duration_s if self.simulator else 0.0,
+            job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order)
+
+    def machine_settings(self, job_folder: str | Path | None = None) -> MachineSimSettings:
+        """The simulated machine's settings from ``[plc.simulator.machine]`` (defaults if absent).
+
+        The job folder is ``job_folder`` if given, else the table's, else ``[plc] job_folder``.
+
+        Raises
+        ------
+        ConfigError
+            No job folder anywhere.
+        """
+        model = (self.simulator.machine if self.simulator else None) or MachineModelSettings()
+        folder = job_folder or model.job_folder or self.link.job_folder
+        if folder is None:
+            raise ConfigError(f"{self.source}: the simulated machine needs a job folder: [plc.simulator.machine] "
+                              "job_folder or [plc] job_folder")
+        return MachineSimSettings(
+            Path(folder), time_scale=model.time_scale, tif_fwhm_mm=model.tif_fwhm_mm,
+            tif_peak_rate_nm_s=model.tif_peak_rate_nm_s, width_error=model.width_error, rate_error=model.rate_error,
+            efficiency_spread=model.efficiency_spread, noise_nm=model.noise_nm, seed=model.seed,
+            max_points=model.max_points, max_total_dwell_s=model.max_total_dwell_s,
+            max_dwell_per_point_s=model.max_dwell_per_point_s, max_feed_mm_s=model.max_feed_mm_s,
+            travel_x_mm=model.travel_x_mm, travel_y_mm=model.travel_y_mm)
+
+    def polishing_machine(self, target: RemovalTarget | None, job_folder: str | Path | None = None
+                          ) -> PolishingMachine:
+        """A fresh simulated machine polishing ``target`` (None: progress only); see :meth:`machine_settings`."""
+        return PolishingMachine(self.machine_settings(job_folder), target)
 
     def polishing_station(self) -> PolishingStation:
         """A fresh simulated machine from ``[plc.simulator.polishing]`` (defaults if absent)."""
@@ -227,6 +299,19 @@ def _check_consistency(config: PlcConfig) -> None:
         link.register_map()
     except ValueError as error:
         raise ConfigError(f"{where} register map: {error}") from None
+    try:
+        link.job_limits()
+    except ValueError as error:
+        raise ConfigError(f"{where} job limits: {error}") from None
+    model = config.simulator.machine if config.simulator is not None else None
+    for name in ("travel_x_mm", "travel_y_mm"):
+        span = getattr(model, name) if model is not None else (0.0, 1.0)
+        if not span[0] < span[1]:
+            raise ConfigError(f"{config.source}: [plc.simulator.machine] {name}: expected [lo, hi] with lo < hi, "
+                              f"got {list(span)}")
+    if model is not None and link.job_register is None:
+        raise ConfigError(f"{config.source}: [plc.simulator.machine] needs the job blocks ([plc] job_register and "
+                          "machine_register)")
     if link.reconnect_initial_s > link.reconnect_max_s:
         raise ConfigError(f"{where} reconnect_initial_s ({link.reconnect_initial_s}) must not exceed "
                           f"reconnect_max_s ({link.reconnect_max_s})")

@@ -19,8 +19,11 @@ Tables (see ``wavestack/config/default.toml``, the simulated station ``wavestack
     :mod:`wavestack.config.plc`; optional. ``url = "sim://plc"`` runs the simulated PLC.
 ``[outputs]``
     :class:`OutputSettings`: what goes to the PLC, through the safety stage.
-``[optic]`` (with ``[optic.aperture]``), ``[bench]``
-    The simulated test optic and how the simulated piezo moves its fringes.
+``[optic]`` (with ``[optic.aperture]`` and optionally ``[optic.surface]``), ``[bench]``
+    The simulated test optic and how the simulated piezo moves its fringes. ``[optic.surface]``
+    (:class:`~wavestack.simulators.SurfaceSettings`) gives the optic a height map polishing can
+    change; its ``map_file`` is read relative to the station file's folder, its ``wavelength_nm``
+    defaults to ``[station] wavelength_nm`` and must equal it when given.
 ``[lenslets]``
     The simulated lenslet array (:class:`~wavestack.simulators.spots.LensletArraySettings`) of a
     simulated Shack-Hartmann camera. ``pitch_px``, ``offset_px`` and ``grid_shape`` default to
@@ -101,7 +104,8 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
     if camera.simulated:
         if "optic" not in document:
             raise ConfigError(f"{source}: [camera] url = 'sim://u3v' needs an [optic] table (the simulated optic)")
-        optic = _section(OpticSettings, document, "optic", source)
+        optic = _simulated_surface(_section(OpticSettings, document, "optic", source), document["optic"], station,
+                                   source)
     config = StationConfig(
         source=source, text=text, station=station,
         processing=processing, camera=camera, camera_simulator=camera_simulator,
@@ -136,7 +140,8 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
         if missing:
             raise ConfigError(f"{source}: a simulated Shack-Hartmann camera (url = 'sim://u3v') needs "
                               f"[{missing[0]}] (the simulated optic and lenslet array)")
-        optic = _section(OpticSettings, document, "optic", source)
+        optic = _simulated_surface(_section(OpticSettings, document, "optic", source), document["optic"], station,
+                                   source)
         lenslets = _simulated_lenslets(document["lenslets"], sensor, station, camera_simulator, source)
     config = StationConfig(
         source=source, text=text, station=station,
@@ -148,6 +153,29 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
     )
     check_station_rules(config)
     return config
+
+
+def _simulated_surface(optic: OpticSettings, table: Mapping[str, Any], station: StationSettings,
+                       source: str) -> OpticSettings:
+    """``optic`` with ``[optic.surface]`` completed: the map file found, the wavelength the station's."""
+    surface = optic.surface
+    if surface is None:
+        return optic
+    given = table["surface"]  # parse_section has checked it is a table
+    changes: dict[str, Any] = {}
+    if "wavelength_nm" not in given:
+        changes["wavelength_nm"] = station.wavelength_nm
+    elif surface.wavelength_nm != station.wavelength_nm:
+        raise ConfigError(f"{source}: [optic.surface] wavelength_nm = {surface.wavelength_nm:g} does not match "
+                          f"[station] wavelength_nm = {station.wavelength_nm:g}; expected the same or no key")
+    if surface.map_file is not None:
+        path = Path(surface.map_file)
+        if not path.is_absolute():
+            path = Path(source).parent / path
+        if not path.is_file():
+            raise ConfigError(f"{source}: [optic.surface] map_file = {surface.map_file!r}: no such file ({path})")
+        changes["map_file"] = str(path)
+    return dataclasses.replace(optic, surface=dataclasses.replace(surface, **changes))
 
 
 def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: StationSettings,

@@ -34,6 +34,8 @@ class StationSettings:
                                       doc="an older result is stale and never forwarded, s")
     reconnect_max_s: float = setting(5.0, minimum=0.01, maximum=600.0, doc="longest reconnect back-off, s")
     set_ring_capacity: int = setting(2, minimum=1, maximum=64, doc="phase-shifted sets held for the pipeline")
+    heap_release_s: float = setting(1.0, minimum=0.0, maximum=3600.0,
+                                    doc="give freed heap memory back to the system at most this often, s (0: never)")
 
 
 @dataclass(frozen=True)

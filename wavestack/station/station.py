@@ -43,6 +43,7 @@ from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
 from wavestack.station.devices import StationDevices, phase_steps_rad, reconnect_devices
 from wavestack.station.interferometer import SetProcessor
+from wavestack.station.heap import HeapRelease
 from wavestack.station.latency import LatencyHistogram
 from wavestack.station.outputs import PlcOutput
 from wavestack.station.results import StationResult, json_ready
@@ -126,6 +127,7 @@ class Station:
         self._not_back = DeviceDisconnected(devices.camera.name, "acquisition not started")  # while no source
         self._output: PlcOutput | None = None
         self._slice_s = _MAX_WAIT_SLICE_S
+        self._heap = HeapRelease(config.station.heap_release_s)
         if devices.link is not None and config.plc is not None:
             heartbeat_period_s = config.plc.link.watchdog_timeout_s / 4
             self._output = PlcOutput(devices.link, config.outputs, config.plc.link.n_terms,
@@ -193,6 +195,8 @@ class Station:
             on_result(record)
             index += 1
             tally.add(record.result)
+            del record, frames  # the set's arrays are freed before the heap is trimmed
+            self._heap.maybe_release(time.monotonic())
         return tally.summary(index, time.monotonic() - started, self._counters()[0])
 
     def _read_set(self, stop: threading.Event) -> tuple[Frame, ...] | None:

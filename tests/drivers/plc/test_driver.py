@@ -1,8 +1,8 @@
 """The PLC driver against the simulated PLC over loopback Modbus/TCP.
 
 Faults are injected through the simulator's own switches; every expectation comes from the
-simulator's ground truth (accepted commands, watchdog state, outputs, the requests it decoded) or
-from a twin polishing model fed the same commands.
+simulator's ground truth (accepted commands, watchdog state, outputs, the requests it decoded, the
+terms its display shows).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from wavestack.drivers.plc import (
     WriteRefused,
     round_to_float32,
 )
-from wavestack.simulators.plc import PlcSimLayout, PlcSimulator, PolishingStation, RemovalCommand, WatchdogState
+from wavestack.simulators.plc import PlcSimLayout, PlcSimulator, PolishingStation, WatchdogState
 
 N_TERMS = 4
 SURFACE_NM = (10.0, 20.0, 30.0, 40.0)
@@ -78,14 +78,6 @@ def as_float32(values: np.ndarray) -> np.ndarray:
     return np.array([round_to_float32(v) for v in values])
 
 
-def twin_surface(*commands: RemovalCommand) -> np.ndarray:
-    """The surface a fresh model with the same seed reaches after ``commands`` (each applied once)."""
-    twin = make_station()
-    for command in commands:
-        twin.apply(command)
-    return twin.surface_nm
-
-
 def wait_for(condition: Callable[[], bool]) -> bool:
     deadline = time.monotonic() + WAIT_S
     while time.monotonic() < deadline:
@@ -108,7 +100,9 @@ def test_each_byte_order_round_trips_through_the_plc(order: str) -> None:
         outputs = link.read_outputs(timeout_s=1.0)
         assert outputs.spindle_enabled and outputs.active_command_id == 1
         np.testing.assert_array_equal(outputs.setpoint_nm, sent)
-        np.testing.assert_array_equal(sim.station.surface_nm, twin_surface(RemovalCommand(1, tuple(sent), 1)))
+        # commands publish the terms for the display and remove nothing (issue 14: removal only through jobs)
+        assert sim.station.displayed == (1, tuple(sent))
+        np.testing.assert_array_equal(sim.station.surface_nm, SURFACE_NM)
 
 
 @pytest.mark.parametrize(("actual", "configured"), list(zip(WORD_ORDERS, WORD_ORDERS[1:] + WORD_ORDERS[:1])))
@@ -143,9 +137,7 @@ def test_handshake_applies_a_command_exactly_once_under_retries_and_a_dropped_re
         command_writes = [r for r in sim.requests if r.function_code == 16 and r.values[:1] == (5,)]
         assert len(command_writes) == 3  # three sends of id 5 reached the PLC ...
         assert sim.accepted_commands == [5]  # ... and it took effect once
-        assert sim.station.passes_applied == 2
-        command = RemovalCommand(5, tuple(as_float32(REMOVAL_NM)), 2)
-        np.testing.assert_array_equal(sim.station.surface_nm, twin_surface(command))
+        assert sim.station.displays == 1 and sim.station.displayed == (5, tuple(as_float32(REMOVAL_NM)))
         count = sim.request_count
         with pytest.raises(ValueError, match="already sent with other parameters"):
             link.send_removal(5, REMOVAL_NM * 2, passes=2, timeout_s=1.0)
@@ -265,6 +257,7 @@ def test_out_of_range_parameters_answer_exception_3_and_change_nothing() -> None
                 link.send_removal(1, removal, passes=passes, timeout_s=1.0)
             assert caught.value.exception_code == 3
         np.testing.assert_array_equal(sim.station.surface_nm, before)
+        assert sim.station.displayed is None
         assert link.read_status(timeout_s=1.0).fault and sim.accepted_commands == []
         assert link.send_removal(1, REMOVAL_NM, passes=1, timeout_s=2.0).status.fault is False  # id reusable
 
