@@ -6,8 +6,12 @@ from pathlib import Path
 
 import pytest
 
+from shared_data import require_shared_data
 from wavestack.config import ConfigError
-from wavestack.config.polishing import MachineSettings, TifSettings, parse_polishing_config
+from wavestack.config.polishing import (DEFAULT_POLISHING_CONFIG, MachineSettings, TifSettings, load_polishing_config,
+                                        parse_polishing_config)
+
+ROOT = Path(__file__).resolve().parents[2]
 
 STATION = (Path(__file__).resolve().parents[1] / "configs" / "station-small.toml").read_text()
 POLISHING = """
@@ -78,3 +82,26 @@ def test_relative_files_resolve_beside_the_configuration(tmp_path: Path) -> None
     config = parse_polishing_config(STATION + POLISHING, source=str(path))
     assert config.resolve("target.npy") == tmp_path / "target.npy"
     assert config.resolve(None) is None
+
+
+def test_the_default_polishing_station_is_packaged_and_loads() -> None:
+    assert DEFAULT_POLISHING_CONFIG.parent.parent.name == "wavestack"  # in the package: works on a fresh machine
+    config = load_polishing_config()
+    surface = config.station.optic.surface
+    assert surface is not None and surface.map_file is None  # Zernike + roughness: no data file needed
+    assert config.station.camera_simulator.width == config.station.camera_simulator.height == 512
+    assert surface.pixel_mm == config.polishing.pixel_mm and config.station.plc.simulator.machine is not None
+
+
+@require_shared_data()
+def test_the_zygo_polishing_station_reads_the_bundled_map() -> None:
+    config = load_polishing_config(ROOT / "config" / "polishing-zygo.toml")
+    assert Path(config.station.optic.surface.map_file).name == "valid_zygo_dat_file.dat"
+
+
+def test_the_optic_and_the_loop_must_share_the_grid() -> None:
+    text = DEFAULT_POLISHING_CONFIG.read_text(encoding="utf-8")
+    changed = text.replace("edge_px = 2\nreflection_factor = 2.0", "edge_px = 2\nreflection_factor = 1.0")
+    assert changed != text
+    with pytest.raises(ConfigError, match=r"\[polishing\] reflection_factor = 1 differs from the simulated optic's"):
+        parse_polishing_config(changed, source="p.toml")
