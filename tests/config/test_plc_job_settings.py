@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import queue
+import re
 import threading
 import time
 from pathlib import Path
@@ -65,8 +66,9 @@ def test_sim_plc_runs_jobs_with_a_machine_on_a_job_folder(tmp_path: Path) -> Non
     runner.start()
     try:
         line = lines.get(timeout=10.0)
-        assert line.startswith("listening 127.0.0.1:") and f"job folder {tmp_path}" in line
-        port = int(line.split()[1].split(":")[1])
+        match = re.fullmatch(r"listening 127\.0\.0\.1:(\d+)", line)  # exactly the line scripts parse
+        assert match is not None, line
+        port = int(match.group(1))
         config = load_plc_config(None)
         with PolishingLink("127.0.0.1", port, config.link.register_map(), config.link.link_timing(),
                            job_limits=config.link.job_limits()) as link:
