@@ -128,12 +128,17 @@ class CycleRecord:
         recording.
     lenslets : LensletSlopes or None
         Shack-Hartmann: the slopes per lenslet and the lenslets used (a frozen value).
+    waves : ndarray (rows, cols) or None
+        Interferometer: the unwrapped wavefront on the fit's grid (every ``fit_decimation``-th
+        pixel), waves, NaN outside the aperture, as the processor made it (never mutated after);
+        None when the set gave none. The polishing loop averages these into its surface map.
     """
 
     result: StationResult
     frames: tuple[Frame, ...] = ()
     new_aperture_mask: NDArray[np.bool_] | None = None
     lenslets: LensletSlopes | None = None
+    waves: NDArray[np.floating] | None = None
 
 
 #: A result sink: the live view, the JSON lines, the recording.

@@ -14,6 +14,7 @@ import logging
 import math
 from contextlib import ExitStack
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from wavestack.drivers.errors import DeviceDisconnected
@@ -25,7 +26,7 @@ from wavestack.config import BIT_DEPTH, StationConfig, build_calibration, build_
 from wavestack.simulators import attach_simulated_device, register_serial_simulators
 from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
 from wavestack.simulators.optic import TestOptic
-from wavestack.simulators.plc import PlcSimulator
+from wavestack.simulators.plc import PlcSimulator, PolishingMachine
 from wavestack.simulators.spots import SpotRenderer, SpotTruth
 from wavestack.simulators.u3v import U3VSimSettings
 from wavestack.station.sim_truth import InterferometerTruthCheck, ShackHartmannTruthCheck
@@ -158,8 +159,12 @@ def _piezo_url(url: str, name: str) -> str:
     return scheme_and_model + (f"?{rest}" if rest else "")
 
 
-def open_station_devices(config: StationConfig, stack: ExitStack) -> StationDevices:
+def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder: Path | None = None) -> StationDevices:
     """Open (and, for ``sim://`` URLs, first build) every device; ``stack`` closes them all.
+
+    A simulated PLC gets a polishing machine (``[plc.simulator.machine]``, or its defaults when
+    ``job_folder`` is given) that reads its jobs from ``job_folder`` (else the configured folder)
+    and polishes the simulated optic's surface, when the optic has one (``[optic.surface]``).
 
     Raises
     ------
@@ -204,18 +209,31 @@ def open_station_devices(config: StationConfig, stack: ExitStack) -> StationDevi
         link_settings = config.plc.link
         host, port = link_settings.host, link_settings.port
         if link_settings.simulated:
-            simulator = PlcSimulator(config.plc.sim_layout(), config.plc.polishing_station(), port=0)
+            simulator = PlcSimulator(config.plc.sim_layout(), config.plc.polishing_station(), port=0,
+                                     machine=_simulated_machine(config, bench, job_folder))
             simulator.start()
             stack.callback(simulator.stop)
             host, port = simulator.host, simulator.port
             devices.plc_simulator = simulator
         link = PolishingLink(host, port, link_settings.register_map(), link_settings.link_timing(),
-                             command_limits=CommandLimits(config.outputs.max_removal_nm, config.outputs.max_step_nm))
+                             command_limits=CommandLimits(config.outputs.max_removal_nm, config.outputs.max_step_nm),
+                             job_limits=link_settings.job_limits())
         stack.callback(link.close)
         link.connect(timeout_s=max(timeout, link_settings.io_timeout_s * 4))
         link.self_check(timeout_s=max(timeout, link_settings.io_timeout_s * 4))
         devices.link = link
     return devices
+
+
+def _simulated_machine(config: StationConfig, bench: SimulatedInterferometer | SimulatedShackHartmann | None,
+                       job_folder: Path | None) -> PolishingMachine | None:
+    """The simulated PLC's polishing machine, polishing the simulated optic's surface (None: no jobs)."""
+    assert config.plc is not None
+    table = config.plc.simulator.machine if config.plc.simulator is not None else None
+    if table is None and job_folder is None:
+        return None
+    surface = bench.optic.surface if isinstance(bench, SimulatedInterferometer) else None
+    return config.plc.polishing_machine(surface, job_folder)
 
 
 def phase_steps_rad(config: StationConfig) -> tuple[float, ...]:

@@ -242,7 +242,8 @@ class Station:
             result = replace(result, valid=False, reason=miscount)
         sent = self._output.send(result) if self._output is not None else None
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
-                           outcome.lenslets if isinstance(outcome, SlopeOutcome) else None)
+                           outcome.lenslets if isinstance(outcome, SlopeOutcome) else None,
+                           None if isinstance(outcome, SlopeOutcome) else outcome.waves)
 
     def _recover(self, stop: threading.Event, wait_s: float, *, force_camera: bool) -> None:
         """After a device fault: retire the source, back off, bring the devices back, start a new source.

@@ -1,0 +1,104 @@
+"""The loop's state machine: every phase x every event, the terminal phases, and the check step's verdicts."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from fuzz import fuzz_settings
+from wavestack.polish.state import (
+    TERMINAL_PHASES,
+    TRANSITIONS,
+    LoopEvent,
+    LoopPhase,
+    LoopState,
+    advance,
+    judge_measurement,
+)
+
+P, E = LoopPhase, LoopEvent
+# The expected next phase of every working phase for every event, written out by hand (not from
+# TRANSITIONS): anything not listed is an unexpected event and must fault.
+EXPECTED = {
+    (P.MEASURING, E.MEASURED): P.CHECKING, (P.MEASURING, E.UNTRUSTED): P.FAULTED,
+    (P.CHECKING, E.AT_TARGET): P.TARGET_MET, (P.CHECKING, E.RUNS_EXHAUSTED): P.MAX_RUNS,
+    (P.CHECKING, E.NOT_IMPROVED): P.NOT_IMPROVING, (P.CHECKING, E.NEEDS_WORK): P.SOLVING,
+    (P.SOLVING, E.SOLVED): P.PROGRAMMING, (P.SOLVING, E.NO_GAIN): P.NOT_IMPROVING,
+    (P.PROGRAMMING, E.PROGRAMMED): P.HANDING_OFF,
+    (P.HANDING_OFF, E.HANDED_OFF): P.POLISHING, (P.POLISHING, E.MACHINE_DONE): P.MEASURING,
+}
+
+
+@pytest.mark.parametrize(("phase", "event"), list(itertools.product(LoopPhase, LoopEvent)),
+                         ids=lambda v: v.value)
+def test_every_phase_and_event(phase: LoopPhase, event: LoopEvent) -> None:
+    state = LoopState(phase, runs_done=2, reason="before")
+    after = advance(state, event, "why")
+    if phase in TERMINAL_PHASES:
+        assert after == state  # a stopped loop never moves again
+    elif event is E.FAULT:
+        assert (after.phase, after.reason) == (P.FAULTED, "why")
+    elif event is E.STOP:
+        assert (after.phase, after.reason) == (P.INTERRUPTED, "why")
+    elif (phase, event) in EXPECTED:
+        assert after.phase is EXPECTED[(phase, event)]
+        assert after.runs_done == 2 + (event is E.MACHINE_DONE)
+    else:
+        assert after.phase is P.FAULTED
+        assert event.value in (after.reason or "") and phase.value in (after.reason or "")
+        assert after.runs_done == 2
+
+
+def test_the_table_is_what_the_tests_expect() -> None:
+    working = [p for p in LoopPhase if p not in TERMINAL_PHASES]
+    listed = {k: v for k, v in TRANSITIONS.items() if k[1] not in (E.FAULT, E.STOP)}
+    assert listed == EXPECTED
+    assert all((p, E.FAULT) in TRANSITIONS and (p, E.STOP) in TRANSITIONS for p in working)
+    assert not any(p in TERMINAL_PHASES for p, _ in TRANSITIONS)
+
+
+def test_only_a_trusted_check_leads_to_solving() -> None:
+    sources = {phase for (phase, _), following in TRANSITIONS.items() if following is P.SOLVING}
+    assert sources == {P.CHECKING}
+    assert {event for (phase, event), f in TRANSITIONS.items() if phase is P.MEASURING and f is P.CHECKING} \
+        == {E.MEASURED}
+
+
+def test_a_job_handed_off_is_never_sent_again() -> None:
+    # out of POLISHING only by the machine's done (to a new measurement) or a stop
+    exits = {f for (phase, _), f in TRANSITIONS.items() if phase is P.POLISHING}
+    assert exits == {P.MEASURING, P.FAULTED, P.INTERRUPTED}
+
+
+@fuzz_settings(200)
+@given(st.lists(st.sampled_from(list(LoopEvent)), max_size=40))
+def test_any_event_sequence_ends_well_formed(events: list[LoopEvent]) -> None:
+    state = LoopState()
+    handoffs = 0
+    for event in events:
+        before = state
+        state = advance(state, event)
+        if state.phase is P.POLISHING and before.phase is P.HANDING_OFF:
+            handoffs += 1
+        assert state.runs_done >= before.runs_done
+        if before.terminal:
+            assert state == before
+    assert handoffs >= state.runs_done  # every finished run had its own hand-off
+
+
+def test_the_check_step_verdicts_in_order() -> None:
+    kw = {"target_rms_nm": 5.0, "max_runs": 3}
+    assert judge_measurement(5.0, None, 0, **kw)[0] is E.AT_TARGET
+    assert judge_measurement(4.0, 3.0, 3, **kw)[0] is E.AT_TARGET  # the target wins over the rest
+    assert judge_measurement(20.0, 19.0, 1, **kw)[0] is E.NOT_IMPROVED
+    assert judge_measurement(20.0, 20.0, 1, **kw)[0] is E.NOT_IMPROVED
+    assert judge_measurement(10.0, 20.0, 3, **kw)[0] is E.RUNS_EXHAUSTED
+    assert judge_measurement(10.0, 20.0, 2, **kw)[0] is E.NEEDS_WORK
+    assert judge_measurement(40.0, None, 0, **kw)[0] is E.NEEDS_WORK
+    assert judge_measurement(float("nan"), None, 0, **kw)[0] is E.FAULT
+    # a required improvement of 10 %: 20 -> 18.5 is not enough
+    assert judge_measurement(18.5, 20.0, 1, min_improvement=0.1, **kw)[0] is E.NOT_IMPROVED
+    assert judge_measurement(17.5, 20.0, 1, min_improvement=0.1, **kw)[0] is E.NEEDS_WORK

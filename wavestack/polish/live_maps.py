@@ -1,0 +1,129 @@
+"""The station's results as the loop sees them: a sink that hands N fresh maps in a row to a waiting measurement.
+
+The station runs in its own thread for the whole campaign (so the PLC heartbeat never pauses,
+whether the loop measures, solves or waits for the machine) and gives every
+:class:`~wavestack.station.cycle.CycleRecord` to a :class:`LiveMaps`. The sink keeps only what
+is asked for: between measurements it notes the last heartbeat and drops the maps. A measurement
+(:meth:`LiveMaps.collect`) asks for ``count`` valid maps in a row exposed after a given time (the
+machine's done); an invalid result empties the window (the maps on either side of a glitch are not
+averaged together), and the measurement gives up, untrusted, after ``max_results`` results, at its
+deadline, or when the station stops.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+from wavestack.polish.measurement import MapSample, UntrustedMeasurement
+from wavestack.station.cycle import CycleRecord
+from wavestack.station.results import Heartbeat
+
+__all__ = ["LiveMaps", "sample_of"]
+
+
+def sample_of(record: CycleRecord) -> MapSample:
+    """The measurement's view of one cycle (pure)."""
+    result = record.result
+    return MapSample(record.waves, bool(result.valid and record.waves is not None), result.reason,
+                     result.aperture.id if result.aperture is not None else None, result.exposure_time_ns)
+
+
+@dataclass
+class _Request:
+    count: int
+    max_results: int
+    not_before_ns: int
+    window: list[MapSample]
+    looked: int = 0
+    last_reason: str | None = None
+
+
+class LiveMaps:
+    """A thread-safe sink for the station's records (module notes).
+
+    Example
+    -------
+    >>> maps = LiveMaps()
+    >>> maps.last_heartbeat is None
+    True
+    """
+
+    def __init__(self) -> None:
+        self._condition = threading.Condition()
+        self._request: _Request | None = None
+        self._ended: str | None = None
+        self._heartbeat: Heartbeat | None = None
+        self.results = 0
+
+    @property
+    def last_heartbeat(self) -> Heartbeat | None:
+        """The PLC heartbeat of the station's latest result (None before any)."""
+        with self._condition:
+            return self._heartbeat
+
+    @property
+    def collecting(self) -> bool:
+        """True while a measurement waits for maps."""
+        with self._condition:
+            return self._request is not None
+
+    def __call__(self, record: CycleRecord) -> None:
+        """The station's sink: called on the station's thread for every result."""
+        with self._condition:
+            self.results += 1
+            output = record.result.output
+            if output is not None and output.heartbeat is not None:
+                self._heartbeat = output.heartbeat
+            request = self._request
+            if request is None or len(request.window) >= request.count or request.looked >= request.max_results:
+                return
+            sample = sample_of(record)
+            if sample.exposure_time_ns < request.not_before_ns:
+                return  # exposed while the machine still polished: not counted at all
+            request.looked += 1
+            if sample.valid:
+                request.window.append(sample)
+            else:
+                request.window.clear()
+                request.last_reason = sample.reason
+            self._condition.notify_all()
+
+    def end(self, why: str) -> None:
+        """The station stopped (its thread calls this last); a waiting measurement gives up."""
+        with self._condition:
+            self._ended = why
+            self._condition.notify_all()
+
+    def collect(self, count: int, *, max_results: int, not_before_ns: int, timeout_s: float,
+                stop: threading.Event, slice_s: float = 0.1) -> list[MapSample]:
+        """Wait for ``count`` valid maps in a row exposed at or after ``not_before_ns``.
+
+        Raises
+        ------
+        UntrustedMeasurement
+            Not enough valid maps in a row within ``max_results`` results or ``timeout_s``, the
+            station ended, or ``stop`` was set; the message says which, with the last invalid
+            result's reason.
+        """
+        request = _Request(count, max_results, not_before_ns, [])
+        deadline = time.monotonic() + timeout_s
+        with self._condition:
+            self._request = request
+            try:
+                while len(request.window) < count:
+                    if self._ended is not None:
+                        raise UntrustedMeasurement(f"the station stopped while measuring: {self._ended}")
+                    if stop.is_set():
+                        raise UntrustedMeasurement("stopped while measuring")
+                    if request.looked >= max_results or time.monotonic() >= deadline:
+                        seen = f"{request.looked} result(s) in {timeout_s:g} s" if request.looked < max_results \
+                            else f"{request.looked} results (max_results_per_measurement)"
+                        last = f"; last invalid: {request.last_reason}" if request.last_reason else ""
+                        raise UntrustedMeasurement(f"expected {count} valid results in a row, got "
+                                                   f"{len(request.window)} in {seen}{last}")
+                    self._condition.wait(slice_s)
+                return list(request.window)
+            finally:
+                self._request = None
