@@ -65,7 +65,7 @@ def test_the_ladder_refuses_with_every_reason_when_nothing_fits() -> None:
     settings = PolishingSettings(pixel_mm=PIXEL_MM, tif=TIF, max_total_dwell_s=0.5,
                                  machine=MachineSettings(travel_x_mm=(-9.0, 9.0), travel_y_mm=(-9.0, 9.0)))
     tif = ToolInfluence.gaussian(TIF.fwhm_mm, TIF.peak_rate_nm_s, PIXEL_MM)
-    with pytest.raises(NoFittingJob, match=r"no fft job fits the limits \(5 tried\)"):
+    with pytest.raises(NoFittingJob, match=r"no fft job fits the limits \(10 tried\)"):  # 5 rungs, then clipped
         plan_job(measurement, tif, settings)
 
 
@@ -85,3 +85,22 @@ def test_the_least_squares_plan_is_executable_and_improves() -> None:
     assert job.solution.solver == "lsq" and np.all(job.program.dwell_s <= 30.0 * (1 + 1e-9))
     # a bounded least-squares dwell on a 1 mm lattice with a 2 mm tool: at least half the error goes
     assert job.predicted_rms_nm < 0.5 * measurement.rms_nm
+
+
+def test_a_solution_over_the_per_point_limit_is_clipped_only_when_nothing_fits_and_only_if_it_helps() -> None:
+    measurement = _measurement(3, 50.0, 3.0)
+    tif = ToolInfluence.gaussian(TIF.fwhm_mm, TIF.peak_rate_nm_s, PIXEL_MM)
+
+    def settings(max_dwell_per_point_s: float) -> PolishingSettings:
+        machine = MachineSettings(travel_x_mm=(-9.0, 9.0), travel_y_mm=(-9.0, 9.0),
+                                  max_dwell_per_point_s=max_dwell_per_point_s, step_px=1)
+        return PolishingSettings(pixel_mm=PIXEL_MM, tif=TIF, machine=machine, max_total_dwell_s=1e5,
+                                 max_removal_nm_per_run=5000.0)
+
+    # a generous limit: a gentler rung fits as it is, and it is taken unclipped (far better than a clipped one)
+    roomy = plan_job(measurement, tif, settings(60.0))
+    assert roomy.predicted_rms_nm < 0.1 * measurement.rms_nm
+    # a limit no rung meets as it is (each asks more at some point): a clipped job, within the limit, that helps
+    tight = plan_job(measurement, tif, settings(8.0))
+    assert tight.program.dwell_s.max() <= 8.0 * (1 + 1e-9)
+    assert tight.predicted_rms_nm < 0.75 * measurement.rms_nm
