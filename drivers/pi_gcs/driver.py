@@ -114,6 +114,7 @@ class PIHexapod:
         self._controller_axes: tuple[str, ...] = ()
         self._travel: Mapping[str, tuple[float, float]] = MappingProxyType({})
         self._stage: SafetyStage | None = None
+        self._stopped_since_move = False
 
     # ------------------------------------------------------------------------------ lifecycle
     @property
@@ -271,16 +272,22 @@ class PIHexapod:
                                  f"({proposal.reason})")
             self._command(gcs.encode_axis_values("MOV", target), "MOV")
             stage.commit(full)
+            self._stopped_since_move = False
             logger.debug("%s: MOV %s from %s", self.name, target, start)
             return HexapodMove(target=MappingProxyType(target), start=MappingProxyType(start))
 
     def wait_on_target(self, timeout_s: float) -> dict[str, float]:
         """Poll ``ONT?`` until every configured axis is on target; return the position read back.
 
+        On arrival ``ERR?`` is read too: after a stop (``#24``, ``HLT``) a PI controller sets the
+        target to where the platform stopped, so ``ONT?`` alone would report a stopped move as
+        arrived.
+
         Raises
         ------
         GcsError
-            The platform did not arrive and the controller reports an error (10 after a stop).
+            The controller reports an error (10 after a stop by anyone), or this driver stopped
+            the platform since the last move.
         DeviceTimeout
             Not on target within ``timeout_s``; the message names the axes off target, their
             positions and whether they still move. The platform is not halted here.
@@ -290,7 +297,7 @@ class PIHexapod:
         while True:
             state = self.on_target()
             if all(state.values()):
-                return self.position()
+                return self._arrived()
             if time.monotonic() >= deadline:
                 break
             time.sleep(_POLL_S)
@@ -303,9 +310,25 @@ class PIHexapod:
         raise DeviceTimeout(self.name, f"not on target after {timeout_s:g} s: axes {off} (positions), "
                             f"moving {[a for a, m in moving.items() if m]}; expected ONT? = 1 on every axis")
 
+    def _arrived(self) -> dict[str, float]:
+        """On target: but a stopped platform is on target too (its target became where it stopped).
+
+        A stop by this driver since the last move, or an error the controller still holds (10
+        after a stop by another client or the front panel), makes the wait fail.
+        """
+        with self._lock:
+            if self._stopped_since_move:
+                raise GcsError(STOPPED_BY_COMMAND, device=self.name, command="HLT or #24 during the move")
+            code = self.error_code()
+            if code != NO_ERROR:
+                raise GcsError(code, device=self.name, command="MOV (while waiting on target)")
+            return self.position()
+
     def halt(self) -> None:
         """Stop the configured axes smoothly (``HLT``); the stop's error 10 is read and cleared."""
-        self._command(gcs.encode_command("HLT", *self.configured_axes), "HLT", allowed=(STOPPED_BY_COMMAND,))
+        with self._lock:
+            self._stopped_since_move = True
+            self._command(gcs.encode_command("HLT", *self.configured_axes), "HLT", allowed=(STOPPED_BY_COMMAND,))
 
     def stop_all(self) -> None:
         """Stop all motion at once (``#24``); then ``ERR?`` must read 10 (and clears it).
@@ -316,6 +339,7 @@ class PIHexapod:
             ``ERR?`` read another nonzero code (the stop itself was sent).
         """
         with self._lock:
+            self._stopped_since_move = True
             deadline = time.monotonic() + self.timeout_s
             self._link.send(gcs.STOP_ALL, deadline)
             code = self.error_code()
