@@ -51,7 +51,7 @@ def parse_tcp_url(url: str) -> tuple[str, int] | None:
     """
     if not url.startswith("tcp://"):
         return None
-    match = _TCP_URL.match(url)
+    match = _TCP_URL.fullmatch(url)
     if match is None or not 0 < int(match.group("port") or DEFAULT_PORT) < 65536:
         raise ValueError(f"expected tcp://HOST[:PORT] with a port 1..65535, got {url!r}")
     return match.group("host").strip("[]"), int(match.group("port") or DEFAULT_PORT)

@@ -59,15 +59,15 @@ READY: Final = 0xB1  #: ``#7`` answer: ready
 BUSY: Final = 0xB0  #: ``#7`` answer: busy
 
 _DECIMALS: Final = 9
-_AXIS_ID = re.compile(r"^[A-Za-z0-9_]{1,16}$")
-_MNEMONIC = re.compile(r"^[*A-Z][A-Z0-9]{0,7}\??$")
+_AXIS_ID = re.compile(r"[A-Za-z0-9_]{1,16}")
+_MNEMONIC = re.compile(r"[*A-Z][A-Z0-9]{0,7}\??")
 _PAIR = re.compile(r"^\s*([A-Za-z0-9_]+)\s*=\s*(\S+)\s*$")
-_HEX = re.compile(r"^(0[xX])?[0-9A-Fa-f]{1,16}$")
+_HEX = re.compile(r"(0[xX])?[0-9A-Fa-f]{1,16}")
 
 
 def check_axis_id(axis: str) -> str:
     """``axis`` if it is a GCS axis identifier (1-16 letters, digits or ``_``), else ValueError."""
-    if not isinstance(axis, str) or not _AXIS_ID.match(axis):
+    if not isinstance(axis, str) or not _AXIS_ID.fullmatch(axis):
         raise ValueError(f"GCS axis identifier must be 1-16 letters, digits or '_', got {axis!r}")
     return axis
 
@@ -110,7 +110,7 @@ def encode_command(mnemonic: str, *args: str | float | bool) -> bytes:
     >>> encode_command("SVO", "X", True)
     b'SVO X 1\\n'
     """
-    if not _MNEMONIC.match(mnemonic):
+    if not _MNEMONIC.fullmatch(mnemonic):
         raise ValueError(f"GCS mnemonic must be 1-8 upper-case letters or digits (optional '*' and '?'), "
                          f"got {mnemonic!r}")
     words = [mnemonic]
@@ -216,7 +216,7 @@ def parse_error_code(lines: Sequence[str], *, device: str) -> int:
 def parse_axes(lines: Sequence[str], *, device: str) -> tuple[str, ...]:
     """The ``SAI?`` reply: one axis identifier per line, in the controller's order."""
     axes = tuple(line.strip() for line in lines)
-    bad = [axis for axis in axes if not _AXIS_ID.match(axis)]
+    bad = [axis for axis in axes if not _AXIS_ID.fullmatch(axis)]
     if not axes or bad or len(set(axes)) != len(axes):
         raise ProtocolError(device, f"SAI?: expected distinct axis identifiers one per line, got {list(lines)[:8]!r}")
     return axes
@@ -232,7 +232,7 @@ def parse_axis_values(lines: Sequence[str], *, device: str, what: str) -> dict[s
     """
     values: dict[str, float] = {}
     for line in lines:
-        match = _PAIR.match(line)
+        match = _PAIR.fullmatch(line)
         number = math.nan
         if match:
             try:
@@ -267,7 +267,7 @@ def parse_motion_mask(lines: Sequence[str], all_axes: Sequence[str], *, device: 
     {'X': True, 'Y': False, 'Z': True}
     """
     text = _single(lines, device, "#5")
-    if not _HEX.match(text):
+    if not _HEX.fullmatch(text):
         raise ProtocolError(device, f"#5: expected a hexadecimal motion mask, got {text!r}")
     mask = int(text, 16)  # bits above len(all_axes) belong to axes the caller did not list: ignored
     return {axis: bool(mask >> i & 1) for i, axis in enumerate(all_axes)}
