@@ -6,6 +6,9 @@ from __future__ import annotations
 import math
 
 import pytest
+from fuzz import fuzz_settings
+from hypothesis import given
+from hypothesis import strategies as st
 
 from wavestack.drivers.errors import DeviceDisconnected, DeviceTimeout, LimitError, ProtocolError
 from wavestack.drivers.pi_gcs import GcsError, HexapodLimits, PIHexapod
@@ -144,7 +147,8 @@ def test_stop_all_is_a_single_byte_then_err_reads_10_and_clears(rig) -> None:
     hexapod.move_absolute({"X": 0.5})
     hexapod.stop_all()
     assert fake.received[-2:] == ["#24", "ERR?"]
-    assert b"\x18" in fake.packets[-2] + fake.packets[-1]
+    stream = b"".join(fake.packets)
+    assert b"\x18" in stream and b"\x18\n" not in stream  # a single byte, no LF
     assert fake.error == 0 and hexapod.moving()["X"] is False
 
 
@@ -236,3 +240,38 @@ def test_the_same_driver_drives_a_two_axis_stage_over_the_serial_url(fake_contro
             stage.move_absolute({"1": 4.0, "2": -3.0})
             assert stage.wait_on_target(1.0) == {"1": 4.0, "2": -3.0}
             assert stage.name.startswith("C-884")
+
+
+def test_no_move_that_reaches_the_wire_breaks_a_limit(fake_controller) -> None:
+    limits = hexapod_limits(step=0.5)
+    # offsets from the start: mostly near the step limit, sometimes far, sometimes not numbers at all
+    offsets = st.one_of(st.floats(min_value=-0.7, max_value=0.7), st.floats(min_value=-20.0, max_value=20.0),
+                        st.sampled_from([math.nan, math.inf]))
+    accepted = []
+    with fake_controller() as fake, PIHexapod(fake.url, limits=limits, timeout_s=0.5) as hexapod:
+        travel = hexapod.controller_limits
+
+        @fuzz_settings(200)
+        @given(st.fixed_dictionaries({}, optional={axis: offsets for axis in AXES}).filter(bool),
+               st.fixed_dictionaries({axis: st.floats(min_value=-5.2, max_value=5.2) for axis in AXES}))
+        def check(offset, start) -> None:
+            fake.pos.update(start)
+            fake.target.update(start)
+            pose = {axis: start[axis] + value for axis, value in offset.items()}
+            sent_before = len(fake.received)
+            try:
+                hexapod.move_absolute(pose)
+            except LimitError:
+                assert not [line for line in fake.received[sent_before:] if line.startswith("MOV")]
+                return
+            accepted.append(pose)
+            (mov,) = [line for line in fake.received[sent_before:] if line.startswith("MOV")]
+            words = mov.split()[1:]
+            for axis, text in zip(words[::2], words[1::2]):
+                value = float(text)
+                lo, hi = limits.soft[axis]
+                assert lo <= value <= hi and travel[axis][0] <= value <= travel[axis][1]
+                assert abs(value - start[axis]) <= limits.max_step[axis]
+
+        check()
+    assert accepted, "no example reached the wire: the property was not exercised"
