@@ -21,20 +21,7 @@ it then passes the safety stage (:class:`~wavestack.drivers.safety.SafetyStage`,
 position read back) and is refused unless the stage forwards it unchanged: a pose is never
 clipped or shortened.
 
-Pose convention (the driver sends and reads the controller's numbers and computes no rotation;
-this records what they mean). PI's hexapod manuals [1]_ say: translations X Y Z are in the
-spatially fixed coordinate system; rotations U V W (deg) are about axes that meet at the pivot
-point (``SPI``) and "always move together with the platform"; "a given rotation in space is
-calculated from the individual rotations in the order U -> V -> W". Rotations about moving axes,
-U first, compose as R = Rx(U) Ry(V) Rz(W) (equivalently: W about the fixed Z, then V about the
-fixed Y, then U about the fixed X), which is *not* Rz(W) Ry(V) Rx(U). The simulator and the
-telescope model should check their rule against this.
-
-References
-----------
-.. [1] Physik Instrumente, MS207E "H-820 Hexapod Microrobot" v2.3.0, section 3.7.4 "Motion"
-   (p. 13); the same text in MS202E "H-850" (p. 14) and MS222E "H-845" (p. 23). The C-887
-   controller's coordinate systems: PI technical note C887T0007.
+The pose convention (what X Y Z U V W mean) is in the package docstring.
 """
 
 from __future__ import annotations
