@@ -3,9 +3,10 @@
 Common ground lives here (frames, the frame ring, typed errors, the safety stage every actuator
 output passes); each device family has its own package with a pure ``protocol`` side and an I/O
 side: :mod:`~wavestack.drivers.u3v` (USB3 Vision cameras over pyusb),
-:mod:`~wavestack.drivers.mdt693b` (Thorlabs piezo controllers over pyserial) and
-:mod:`~wavestack.drivers.plc` (the polishing-station PLC over Modbus/TCP). The family packages are
-imported explicitly, so importing this one loads no USB, serial or Modbus library.
+:mod:`~wavestack.drivers.mdt693b` (Thorlabs piezo controllers over pyserial),
+:mod:`~wavestack.drivers.plc` (the polishing-station PLC over Modbus/TCP) and
+:mod:`~wavestack.drivers.pi_gcs` (PI hexapods and stages, GCS 2.0 over TCP or RS-232). The family
+packages are imported explicitly, so importing this one loads no USB, serial or Modbus library.
 """
 
 from __future__ import annotations
