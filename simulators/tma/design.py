@@ -16,6 +16,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
 __all__ = ["PupilShape", "TmaDesign", "TmaMirror"]
 
 
@@ -86,12 +89,20 @@ class PupilShape:
             raise ValueError(f"pupil.corner_radius_mm: expected 0 .. {min(self.size_mm) / 2:g} "
                              f"(half the short side), got {self.corner_radius_mm:g}")
 
-    def contains(self, x_mm, y_mm):  # noqa: ANN001, ANN201 - numpy in, numpy out
-        """Boolean mask of the points ``(x_mm, y_mm)`` (stop-plane mm, any shape) inside the pupil."""
+    def contains(self, x_mm: ArrayLike, y_mm: ArrayLike) -> NDArray[np.bool_]:
+        """Boolean mask of the points ``(x_mm, y_mm)`` (stop-plane mm, any shape) inside the pupil.
+
+        Examples
+        --------
+        >>> PupilShape((0.0, 150.0), (240.0, 80.0), 20.0).contains([0.0, 119.0, 119.0], [150.0, 150.0, 189.0])
+        array([ True,  True, False])
+        """
+        x_mm = np.asarray(x_mm, dtype=np.float64)
+        y_mm = np.asarray(y_mm, dtype=np.float64)
         half_w, half_h = self.size_mm[0] / 2, self.size_mm[1] / 2
         r = self.corner_radius_mm
-        dx = abs(x_mm - self.centre_mm[0]) - (half_w - r)
-        dy = abs(y_mm - self.centre_mm[1]) - (half_h - r)
+        dx = np.abs(x_mm - self.centre_mm[0]) - (half_w - r)
+        dy = np.abs(y_mm - self.centre_mm[1]) - (half_h - r)
         inner = (dx <= 0) | (dy <= 0)
         return ((dx <= r) & (dy <= r)) & (inner | (dx * dx + dy * dy <= r * r))
 

@@ -48,6 +48,9 @@ class TmaModel:
         How far the as-built telescope may differ from the design; None: a perfect build.
     seed : int, optional
         Overrides ``errors.seed`` when given.
+    mount : HexapodPose, optional
+        The aligned mirror's unknown mounting error on the platform (the misalignment an
+        alignment run starts from; the hexapod pose near ``-mount`` realigns the telescope).
 
     Examples
     --------
@@ -62,8 +65,10 @@ class TmaModel:
     ((64, 128), True, True)
     """
 
-    def __init__(self, design: TmaDesign, errors: AsBuiltErrors | None = None, seed: int | None = None) -> None:
+    def __init__(self, design: TmaDesign, errors: AsBuiltErrors | None = None, seed: int | None = None,
+                 mount: HexapodPose | None = None) -> None:
         self.design = design
+        self.mount = mount or HexapodPose()
         errors = errors or AsBuiltErrors()
         if seed is not None:
             errors = AsBuiltErrors(errors.decentre_mm_rms, errors.despace_mm_rms, errors.tilt_deg_rms, seed)
@@ -90,7 +95,7 @@ class TmaModel:
         return self._optic(pose)
 
     def _posed_optic(self, pose: HexapodPose) -> batoid.CompoundOptic:
-        return build_optic(self.design, self.as_built, pose)
+        return build_optic(self.design, self.as_built, pose, self.mount)
 
     def _rays(self, optic: batoid.CompoundOptic, field_deg: tuple[float, float]) -> batoid.RayVector:
         # fromStop takes coordinates on the stop surface, whose frame is centred on the pupil

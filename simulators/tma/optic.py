@@ -87,7 +87,7 @@ def _surface(radius_m: float, conic: float) -> batoid.Surface:
 
 
 def build_optic(design: TmaDesign, as_built: dict[str, MirrorError] | None = None,
-                pose: HexapodPose | None = None) -> batoid.CompoundOptic:
+                pose: HexapodPose | None = None, mount: HexapodPose | None = None) -> batoid.CompoundOptic:
     """The batoid optic of the design with its as-built errors and the aligned mirror's pose.
 
     Parameters
@@ -97,6 +97,9 @@ def build_optic(design: TmaDesign, as_built: dict[str, MirrorError] | None = Non
         Rigid-body errors about each mirror's vertex (tilt about x, then y, fixed axes).
     pose : HexapodPose, optional
         The hexapod pose of ``design.aligned_mirror`` about ``design.pivot()``.
+    mount : HexapodPose, optional
+        Where the aligned mirror sits on the platform at the home pose (its unknown mounting
+        error, same rule about the same pivot), applied before ``pose``: ``p' = P(M(p))``.
 
     Returns
     -------
@@ -118,8 +121,9 @@ def build_optic(design: TmaDesign, as_built: dict[str, MirrorError] | None = Non
         rot = rotation_y(err.tilt_y_deg) @ rotation_x(err.tilt_x_deg)
         optic = optic.withGloballyRotatedOptic(name, rot, rotCenter=vertex)
         optic = optic.withGloballyShiftedOptic(name, [err.dx_mm * _MM, err.dy_mm * _MM, err.dz_mm * _MM])
-    if pose is not None and pose != HexapodPose():
-        pivot = np.asarray(design.pivot()) * _MM
-        optic = optic.withGloballyRotatedOptic(design.aligned_mirror, pose.rotation(), rotCenter=pivot)
-        optic = optic.withGloballyShiftedOptic(design.aligned_mirror, [pose.x * _MM, pose.y * _MM, pose.z * _MM])
+    pivot = np.asarray(design.pivot()) * _MM
+    for step in (mount, pose):
+        if step is not None and step != HexapodPose():
+            optic = optic.withGloballyRotatedOptic(design.aligned_mirror, step.rotation(), rotCenter=pivot)
+            optic = optic.withGloballyShiftedOptic(design.aligned_mirror, [step.x * _MM, step.y * _MM, step.z * _MM])
     return optic

@@ -152,3 +152,36 @@ def test_as_built_errors_are_seeded_and_change_the_wavefront():
     assert np.nanstd(wa - wc) > 1e-3
     with pytest.raises(ValueError, match="tilt_deg_rms"):
         AsBuiltErrors(tilt_deg_rms=-1.0)
+
+
+def test_the_off_axis_beams_clear_every_mirror_and_the_image(model):
+    # the point of an off-axis section: no mirror sits in another beam. In the y-z plane, at
+    # every field point: M3's footprint lies below M1's, the incoming beam passes above M2,
+    # and the M2 -> M3 and M1 -> M2 beams pass above the image where they cross its plane.
+    design = model.design
+    optic = model.optic(HexapodPose())
+    z_m2 = design.mirror("M2").vertex_z_mm
+    z_image = design.image_z_mm
+    for field in design.field_points_deg:
+        full = optic.traceFull(model._rays(optic, field))
+        y = {name: full[name]["out"].toCoordSys(batoid.CoordSys()).r[:, 1] * 1e3 for name in full}
+        slope_in = math.tan(math.radians(field[1]))  # incoming rays: y changes by -slope per +z
+        assert y["M3"].max() + 20 < y["M1"].min()
+        assert y["M2"].max() + 20 < y["M1"].min() - z_m2 * slope_in
+        m2_to_m3_at_image = y["M3"] + (y["M2"] - y["M3"]) * z_image / z_m2
+        assert y["Detector"].max() + 20 < m2_to_m3_at_image.min()
+
+
+@pytest.mark.parametrize("mount", [HexapodPose(x=0.2, y=-0.1, z=0.15), HexapodPose(u=0.02), HexapodPose(v=-0.03)])
+def test_a_mounting_error_is_undone_by_the_opposite_pose(mount):
+    # a pure translation, or a rotation about one axis through the pivot, is undone exactly by its
+    # opposite (a general pose is not: P(M(p)) leaves R_P t_M - t_M, the loop's job to remove)
+    design, _ = example()
+    model = TmaModel(design, mount=mount)
+    field = design.field_points_deg[0]
+    opposite = HexapodPose(*(-value for value in mount.as_tuple()))
+    misaligned = model.wavefront(field, HexapodPose())
+    undone = model.wavefront(field, opposite)
+    nominal = TmaModel(design).wavefront(field, HexapodPose())
+    assert np.nanstd(misaligned - nominal) > 1.0  # waves: far from aligned
+    assert np.nanstd(undone - nominal) < 1e-6
