@@ -12,7 +12,9 @@ Rotations in the order U, V, W about axes that move with the platform are intrin
 so the platform's attitude is ``R = Rx(U) @ Ry(V) @ Rz(W)``, which is the same matrix as
 rotating about the *fixed* axes in the order W, V, U. This differs from the working contract's
 ``Rz(W) Ry(V) Rx(U)`` (fixed axes in the order U, V, W); the manual's text is what we follow.
-For the tilts of an alignment (hundredths of a degree) the two differ by ~1e-7 rad.
+For the tilts of an alignment (hundredths of a degree) the two differ by ~1e-7 rad. (The manuals'
+figure "Example: Consecutive rotations" that illustrates the moving axes was not readable through
+the text copies; the sentence above is what this rule rests on.)
 
 A point ``p`` of the platform goes to ``p' = pivot + t + R (p - pivot)``: the pivot travels with
 the translation ``t = (X, Y, Z)`` and the rotation leaves it fixed.
