@@ -1,0 +1,17 @@
+"""The Examples sections of the TMA modules run as doctests, and can fail."""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ("wavestack.simulators.tma.design", "wavestack.simulators.tma.pose", "wavestack.simulators.tma.model")
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_examples_run(name: str) -> None:
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 0, f"{name} has no Examples to run"
+    assert result.failed == 0
