@@ -10,6 +10,7 @@ Written from PI's documents, never from wavestack's driver (a shared parser woul
 - :mod:`.faults`: :class:`GcsSimFaults` (error on the next command, stuck axis, slow move,
   dropped connection, split or truncated answers);
 - :mod:`.server`: :class:`HexapodSimulator`, the TCP server (``wavestack sim hexapod``);
+- :mod:`.pty_serial`: :class:`GcsPtyBridge`, the same controller on a pseudo-terminal (RS-232);
 - :mod:`.codes`: PI's GCS error numbers it sets.
 """
 
@@ -20,6 +21,7 @@ from wavestack.simulators.pi_gcs.controller import GcsController
 from wavestack.simulators.pi_gcs.faults import GcsSimFaults, ReplyFault
 from wavestack.simulators.pi_gcs.framing import Delivery, LineAssembler, format_reply
 from wavestack.simulators.pi_gcs.motion import Segment, plan_segment
+from wavestack.simulators.pi_gcs.pty_serial import GcsPtyBridge
 from wavestack.simulators.pi_gcs.pose import SimPose, platform_transform, rotation_matrix
 from wavestack.simulators.pi_gcs.server import DEFAULT_GCS_PORT, HexapodSimulator
 from wavestack.simulators.pi_gcs.settings import HEXAPOD_AXES, HexapodSimSettings
@@ -29,6 +31,7 @@ __all__ = [
     "Delivery",
     "GCS_ERRORS",
     "GcsController",
+    "GcsPtyBridge",
     "GcsSimFaults",
     "HEXAPOD_AXES",
     "HexapodSimSettings",

@@ -7,10 +7,10 @@ from types import ModuleType
 
 import pytest
 
-from wavestack.simulators.pi_gcs import controller, framing, motion, pose, server, settings
+from wavestack.simulators.pi_gcs import controller, framing, motion, pose, pty_serial, server, settings
 
 
-@pytest.mark.parametrize("module", [controller, framing, motion, pose, server, settings], ids=lambda m: m.__name__)
+@pytest.mark.parametrize("module", [controller, framing, motion, pose, pty_serial, server, settings], ids=lambda m: m.__name__)
 def test_examples_run(module: ModuleType) -> None:
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0, f"{module.__name__} has no Examples to run"
