@@ -50,6 +50,7 @@ _PIVOT_AXES = ("R", "S", "T")
 _ROTATIONS = ("U", "V", "W")
 _AXIS_QUERIES = ("POS?", "MOV?", "ONT?", "SVO?", "FRF?", "TMN?", "TMX?")
 _SEPARATORS = re.compile(r"[ \t]+")
+_DECIMAL = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 
 
 class _Refused(Exception):
@@ -61,11 +62,11 @@ class _Refused(Exception):
 
 
 def _number(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise _Refused(codes.PARAM_SYNTAX) from None
-    if not math.isfinite(value) or text.lower().lstrip("+-") in ("inf", "infinity", "nan"):
+    """A decimal number as GCS writes them (no inf, nan, hex or digit separators); else error 1."""
+    if not _DECIMAL.match(text):
+        raise _Refused(codes.PARAM_SYNTAX)
+    value = float(text)
+    if not math.isfinite(value):  # 1e999
         raise _Refused(codes.PARAM_SYNTAX)
     return value
 
@@ -175,7 +176,7 @@ class GcsController:
         kind, text = event
         with self._lock:
             now = self._now()
-            self._commands.append(text or kind)
+            self._commands.append(text)
             self.commands_received += 1
             if kind == "too_long":
                 self._error = codes.COMMAND_TOO_LONG

@@ -110,7 +110,7 @@ def test_csv_answers_the_gcs_syntax_version(serve, connect) -> None:
 @pytest.mark.parametrize(("command", "code"), [
     ("FOO", 2), ("MOV? Q", 15), ("MOV Q 1", 15), ("MOV X 99", 7), ("MOV X -99", 7), ("MOV X", 1),
     ("MOV X abc", 1), ("MOV X nan", 1), ("MOV X 1 X 2", 22), ("CSV? X", 24), ("VLS 0", 8), ("VLS 1e9", 8),
-    ("SVO X 2", 1), ("SPI Q 1", 15), ("POS? x", 15),
+    ("SVO X 2", 1), ("SPI Q 1", 15), ("POS? x", 15), ("MOV X 1_0", 1), ("MOV X 0x1", 1), ("MOV X 1e999", 1),
 ])
 def test_refused_commands_set_pis_error_code_and_change_nothing(serve, connect, command: str, code: int) -> None:
     simulator = serve()
