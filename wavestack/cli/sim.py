@@ -32,6 +32,14 @@ def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
                      help="allow a non-loopback host (Modbus/TCP has no authentication)")
     plc.add_argument("--job-folder", type=Path,
                      help="run a polishing machine that takes its job files from this folder")
+    hexapod = devices.add_parser("hexapod", help="PI C-887 hexapod controller on GCS 2.0 over TCP",
+                                 description="Serve the simulated PI hexapod controller (GCS 2.0); "
+                                             "prints 'listening HOST:PORT'.")
+    hexapod.add_argument("--config", type=Path, help="TOML with [hexapod.simulator] (default: built in)")
+    hexapod.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    hexapod.add_argument("--port", type=int, default=0, help="TCP port; 0 picks a free one (default)")
+    hexapod.add_argument("--allow-remote", action="store_true",
+                         help="allow a non-loopback host (GCS over TCP has no authentication)")
 
 
 def _announce(line: str) -> None:
@@ -47,6 +55,11 @@ def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
         def runner() -> None:
             run_pzt_simulator(args.config, _announce, stop)
+    elif args.device == "hexapod":
+        from wavestack.cli.sim_hexapod import run_hexapod_simulator
+
+        def runner() -> None:
+            run_hexapod_simulator(args.config, args.host, args.port, args.allow_remote, _announce, stop)
     else:
         from wavestack.cli.sim_plc import run_plc_simulator
 
@@ -61,7 +74,7 @@ def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 COMMAND = Command(
     "sim",
-    help="run a simulated instrument standalone (pzt, plc)",
+    help="run a simulated instrument standalone (pzt, plc, hexapod)",
     description="Run one simulated instrument on its real transport until Ctrl-C or SIGTERM.",
     add_arguments=add_sim_arguments, handler=run_sim,
     subject=lambda args: str(args.config) if args.config else f"sim {args.device}",

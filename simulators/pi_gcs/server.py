@@ -1,0 +1,264 @@
+"""The simulated controller on TCP, as a C-887 serves GCS on its Ethernet port (PI's default: 50000).
+
+One thread runs a ``selectors`` loop over the listening socket, every client connection and a wake-up
+socket pair: it reads whatever bytes arrive (several commands in one packet, one command over
+several packets: :class:`~wavestack.simulators.pi_gcs.framing.LineAssembler` does not care), feeds
+them to the :class:`~wavestack.simulators.pi_gcs.controller.GcsController` and writes the answers,
+honouring split replies (pieces released at their times) and dropped connections. All clients share
+the one controller (one error state, one platform), as on the real device.
+
+:meth:`HexapodSimulator.stop` wakes the loop, which closes every socket before the thread ends; the
+caller joins the thread, so nothing outlives the ``with`` block.
+"""
+
+from __future__ import annotations
+
+import logging
+import selectors
+import socket
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from types import TracebackType
+
+from wavestack.simulators.pi_gcs.controller import GcsController
+from wavestack.simulators.pi_gcs.faults import GcsSimFaults
+from wavestack.simulators.pi_gcs.framing import LineAssembler
+from wavestack.simulators.pi_gcs.pose import SimPose
+from wavestack.simulators.pi_gcs.settings import HexapodSimSettings
+
+__all__ = ["DEFAULT_GCS_PORT", "HexapodSimulator"]
+
+_log = logging.getLogger(__name__)
+
+#: PI's TCP port for GCS on its controllers.
+DEFAULT_GCS_PORT = 50000
+_IDLE_S = 0.1  # longest sleep of the loop when nothing is due
+_SEND_TIMEOUT_S = 2.0  # a host that stops reading cannot hang the loop for longer
+
+
+@dataclass
+class _Client:
+    sock: socket.socket
+    assembler: LineAssembler = field(default_factory=LineAssembler)
+    outbox: deque[tuple[float, bytes]] = field(default_factory=deque)  # (monotonic due time, chunk)
+    close_when_sent: bool = False
+    last_due: float = 0.0
+
+
+class HexapodSimulator:
+    """A simulated PI GCS 2.0 controller serving TCP from a background thread.
+
+    Parameters
+    ----------
+    settings
+        Axes, limits, velocity, pivot, identity (the hexapod by default; two axes for the field stage).
+    host, port
+        Where to listen; port 0 picks a free port (see :attr:`port`).
+    clock
+        Simulated-time clock, s (tests pass one they advance by hand).
+
+    Attributes
+    ----------
+    controller
+        The device model (ground truth for tests).
+    faults
+        Its fault switches.
+
+    Examples
+    --------
+    >>> import socket
+    >>> with HexapodSimulator(HexapodSimSettings()) as sim:
+    ...     with socket.create_connection(("127.0.0.1", sim.port), timeout=5.0) as link:
+    ...         link.sendall(b"CSV?\\n")
+    ...         link.recv(64)
+    b'2.0\\n'
+    """
+
+    def __init__(self, settings: HexapodSimSettings | None = None, *, host: str = "127.0.0.1", port: int = 0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.controller = GcsController(settings or HexapodSimSettings(), clock=clock)
+        self.faults: GcsSimFaults = self.controller.faults
+        self._host, self._port = host, port
+        self._thread: threading.Thread | None = None
+        self._stopping = threading.Event()
+        self._wake_r: socket.socket | None = None
+        self._wake_w: socket.socket | None = None
+        self._listener: socket.socket | None = None
+        self._clients_lock = threading.Lock()
+        self._clients: dict[int, _Client] = {}
+        self._drop_all = threading.Event()
+        self.connections = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def host(self) -> str:
+        """The address the server is bound to."""
+        return self._host
+
+    @property
+    def port(self) -> int:
+        """The TCP port the server listens on (the real one once started)."""
+        return self._port
+
+    @property
+    def pose(self) -> SimPose:
+        """Every axis's position now (thread-safe snapshot)."""
+        return self.controller.pose
+
+    def start(self) -> HexapodSimulator:
+        """Bind, listen and serve in a background thread; returns once listening."""
+        if self._thread is not None:
+            raise RuntimeError("the GCS simulator is already running")
+        listener = socket.create_server((self._host, self._port), family=_family(self._host), backlog=8)
+        listener.setblocking(False)
+        self._listener = listener
+        self._port = int(listener.getsockname()[1])
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._stopping.clear()
+        self._thread = threading.Thread(target=self._serve, name=f"gcs-simulator-{self._port}", daemon=True)
+        self._thread.start()
+        _log.info("GCS simulator listening on %s:%d", self._host, self._port)
+        return self
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Close every connection and the listener and join the thread; idempotent."""
+        thread = self._thread
+        if thread is None:
+            return
+        self._stopping.set()
+        self._wake()
+        thread.join(timeout_s)
+        if thread.is_alive():
+            raise TimeoutError(f"GCS simulator thread did not stop within {timeout_s} s")
+        self._thread = None
+        for sock in (self._wake_r, self._wake_w):
+            if sock is not None:
+                sock.close()
+        self._wake_r = self._wake_w = None
+
+    def disconnect_clients(self) -> None:
+        """Close every client connection now (the cable pulled); the listener keeps accepting."""
+        self._drop_all.set()
+        self._wake()
+
+    @property
+    def client_count(self) -> int:
+        """Client connections open now."""
+        with self._clients_lock:
+            return len(self._clients)
+
+    def __enter__(self) -> HexapodSimulator:
+        return self.start()
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None,
+                 traceback: TracebackType | None) -> None:
+        self.stop()
+
+    # ------------------------------------------------------------------ the loop thread
+    def _wake(self) -> None:
+        try:
+            if self._wake_w is not None:
+                self._wake_w.send(b"\0")
+        except OSError:  # the buffer is full (a wake-up is pending anyway) or the pair is closing
+            pass
+
+    def _serve(self) -> None:
+        selector = selectors.DefaultSelector()
+        listener, wake = self._listener, self._wake_r
+        assert listener is not None and wake is not None
+        selector.register(listener, selectors.EVENT_READ, "accept")
+        selector.register(wake, selectors.EVENT_READ, "wake")
+        try:
+            while not self._stopping.is_set():
+                for key, _ in selector.select(self._timeout()):
+                    if key.data == "accept":
+                        self._accept(selector, listener)
+                    elif key.data == "wake":
+                        wake.recv(4096)
+                    else:
+                        self._read(selector, key.data)
+                if self._drop_all.is_set():
+                    self._drop_all.clear()
+                    for client in self._snapshot():
+                        self._close(selector, client)
+                self._flush(selector)
+        except Exception:  # a bug must not leave sockets open; log it and shut down
+            _log.exception("GCS simulator loop failed")
+        finally:
+            for client in self._snapshot():
+                self._close(selector, client)
+            selector.close()
+            listener.close()
+            self._listener = None
+
+    def _snapshot(self) -> list[_Client]:
+        with self._clients_lock:
+            return list(self._clients.values())
+
+    def _timeout(self) -> float:
+        now = time.monotonic()
+        due = [c.outbox[0][0] for c in self._snapshot() if c.outbox]
+        return max(0.0, min([_IDLE_S, *(d - now for d in due)]))
+
+    def _accept(self, selector: selectors.BaseSelector, listener: socket.socket) -> None:
+        try:
+            sock, _ = listener.accept()
+        except (BlockingIOError, InterruptedError):
+            return
+        sock.settimeout(_SEND_TIMEOUT_S)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        client = _Client(sock)
+        with self._clients_lock:
+            self._clients[sock.fileno()] = client
+            self.connections += 1
+        selector.register(sock, selectors.EVENT_READ, client)
+
+    def _read(self, selector: selectors.BaseSelector, client: _Client) -> None:
+        try:
+            data = client.sock.recv(4096)
+        except OSError:
+            data = b""
+        if not data:
+            self._close(selector, client)
+            return
+        now = time.monotonic()
+        for event in client.assembler.feed(data):
+            delivery = self.controller.handle(event)
+            due = max(now, client.last_due)
+            for delay_s, chunk in delivery.pieces:
+                due += delay_s
+                client.outbox.append((due, chunk))
+            client.last_due = due
+            if delivery.close:
+                client.close_when_sent = True
+                break  # the connection is gone: nothing after this command is read
+
+    def _flush(self, selector: selectors.BaseSelector) -> None:
+        now = time.monotonic()
+        for client in self._snapshot():
+            try:
+                while client.outbox and client.outbox[0][0] <= now:
+                    client.sock.sendall(client.outbox.popleft()[1])
+            except OSError:
+                self._close(selector, client)
+                continue
+            if client.close_when_sent and not client.outbox:
+                self._close(selector, client)
+
+    def _close(self, selector: selectors.BaseSelector, client: _Client) -> None:
+        with self._clients_lock:
+            if self._clients.get(client.sock.fileno()) is not client:
+                return
+            del self._clients[client.sock.fileno()]
+        try:
+            selector.unregister(client.sock)
+        except (KeyError, ValueError):
+            pass
+        client.sock.close()
+
+
+def _family(host: str) -> socket.AddressFamily:
+    return socket.AF_INET6 if ":" in host else socket.AF_INET
