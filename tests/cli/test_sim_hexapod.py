@@ -19,24 +19,7 @@ from wavestack.simulators.pi_gcs import HexapodSimSettings
 
 # What a config/hexapod-sim.toml would hold (the built-in hexapod, every key written out). It lives here
 # until the merge ships it in config/ (tests/config/test_meaningful_config.py lists the shipped files).
-EXAMPLE_TOML = """\
-# The simulated PI C-887 hexapod controller (`wavestack sim hexapod --config config/hexapod-sim.toml`).
-# Equal to the built-in defaults. [hexapod] itself holds the driver's settings (another file's job);
-# the simulator reads only [hexapod.simulator]. A two-axis field stage uses the same keys under its own
-# table, e.g. [field_stage.simulator] with axes = ["X", "Y"] (no rotation axes: no pivot, SPI unknown).
-
-[hexapod.simulator]
-axes = ["X", "Y", "Z", "U", "V", "W"]
-low_limits = [-17.0, -16.0, -6.5, -14.5, -14.5, -20.0]    # TMN?, mm and deg
-high_limits = [17.0, 16.0, 6.5, 14.5, 14.5, 20.0]         # TMX?, mm and deg
-velocity = 2.0                                             # VLS at power-on, units/s
-max_velocity = 20.0                                        # largest VLS accepted
-pivot = [0.0, 0.0, 0.0]                                    # SPI R S T, mm
-idn = "Physik Instrumente (PI) GmbH & Co. KG, C-887.52, SIM0000001, wavestack simulator 1.0"
-referenced = true                                          # false: FRF before the first MOV
-servo = true
-reference_time_s = 0.2
-"""
+EXAMPLE_TOML = (Path(__file__).resolve().parents[2] / "config" / "hexapod-sim.toml").read_text(encoding="utf-8")
 
 
 @pytest.fixture
