@@ -15,20 +15,16 @@ write fails. ``close()`` stops and joins the thread and closes both descriptors.
 from __future__ import annotations
 
 import logging
-import os
-import select
-import threading
-import tty
-from types import TracebackType
 
 from wavestack.simulators.mdt693b.device import MDT693BDevice
+from wavestack.simulators.pty_port import PtyServer
 
 logger = logging.getLogger(__name__)
 
 _POLL_S = 0.02  # how often the serving thread looks at the stop flag and the unplugged switch
 
 
-class PtyBridge:
+class PtyBridge(PtyServer):
     """A simulated controller behind a pseudo-terminal.
 
     Parameters
@@ -46,88 +42,22 @@ class PtyBridge:
 
     def __init__(self, device: MDT693BDevice) -> None:
         self.device = device
-        master, slave = os.openpty()
-        try:
-            tty.setraw(slave)
-            self.port_path = os.ttyname(slave)
-        except BaseException:
-            os.close(master)
-            os.close(slave)
-            raise
-        self._master: int | None = master
-        self._slave: int | None = slave
-        self._fd_lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._serve, name=f"pty-bridge {self.port_path}", daemon=False)
-        self._thread.start()
+        super().__init__("pty bridge", daemon=False)
         logger.info("simulated %s on %s", device.personality.model, self.port_path)
-
-    @property
-    def unplugged(self) -> bool:
-        """True once the master side has been closed by the unplugged fault."""
-        with self._fd_lock:
-            return self._master is None and not self._stop.is_set()
-
-    def close(self) -> None:
-        """Stop serving, join the thread and close both descriptors; idempotent."""
-        self._stop.set()
-        if self._thread.is_alive() and threading.current_thread() is not self._thread:
-            self._thread.join()
-        with self._fd_lock:
-            for fd in (self._master, self._slave):
-                if fd is not None:
-                    os.close(fd)
-            self._master = self._slave = None
-
-    def __enter__(self) -> PtyBridge:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 traceback: TracebackType | None) -> None:
-        self.close()
 
     def _serve(self) -> None:
         while not self._stop.is_set():
-            master = self._master
-            if master is None:  # unplugged: nothing left to serve until close()
+            if self.device.faults.unplugged:
+                self._port.unplug()
+            data = self._port.read(_POLL_S)
+            if data is None:  # unplugged: nothing left to serve until close()
                 self._stop.wait(_POLL_S)
                 continue
-            if self.device.faults.unplugged:
-                self._unplug()
-                continue
-            try:
-                readable, _, _ = select.select([master], [], [], _POLL_S)
-                if not readable:
-                    continue
-                data = os.read(master, 4096)
-            except OSError as error:
-                logger.warning("pty bridge %s: read failed (%s); unplugging", self.port_path, error)
-                self._unplug()
+            if not data:
                 continue
             reply = self.device.feed(data)
             for delay, chunk in self.device.delivery_plan(reply):
                 if delay and self._stop.wait(delay):
                     return
-                if not self._write(chunk):
+                if self.device.faults.unplugged or not self._port.write(chunk):
                     break
-
-    def _write(self, chunk: bytes) -> bool:
-        master = self._master
-        if master is None or self.device.faults.unplugged:
-            return False
-        view = memoryview(chunk)
-        try:
-            while view:
-                written = os.write(master, view)
-                view = view[written:]
-        except OSError as error:
-            logger.warning("pty bridge %s: write failed (%s)", self.port_path, error)
-            return False
-        return True
-
-    def _unplug(self) -> None:
-        with self._fd_lock:
-            if self._master is not None:
-                os.close(self._master)
-                self._master = None
-                logger.info("pty bridge %s: unplugged", self.port_path)
