@@ -11,7 +11,7 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
-from wavestack.cli.sim_plc import is_loopback
+from wavestack.cli.sim_plc import check_bind
 from wavestack.config.hexapod_sim import load_hexapod_sim_config
 from wavestack.simulators.pi_gcs import HexapodSimulator
 
@@ -47,12 +47,7 @@ def run_hexapod_simulator(config_path: Path | None, host: str, port: int, allow_
     ConfigError
         A bad configuration.
     """
-    if not is_loopback(host) and not allow_remote:
-        raise ValueError(f"refusing to serve the hexapod simulator on {host!r}: GCS over TCP has no authentication, "
-                         "so only a loopback address (127.0.0.1, ::1, localhost) is allowed; pass --allow-remote "
-                         "to serve on another interface")
-    if not 0 <= port <= 65535:
-        raise ValueError(f"port must be 0..65535 (0 = any free port), got {port}")
+    check_bind(host, port, allow_remote, simulator="the hexapod simulator", protocol="GCS over TCP")
     settings = load_hexapod_sim_config(config_path)
     simulator = HexapodSimulator(settings, host=host, port=port)
     try:

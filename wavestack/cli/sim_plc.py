@@ -27,6 +27,20 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+def check_bind(host: str, port: int, allow_remote: bool, *, simulator: str, protocol: str) -> None:
+    """Refuse a non-loopback ``host`` without ``allow_remote``, and a port outside 0..65535 (ValueError).
+
+    A simulator's protocol has no authentication: on another interface anyone who reaches the
+    port could command the (simulated) machine.
+    """
+    if not is_loopback(host) and not allow_remote:
+        raise ValueError(f"refusing to serve {simulator} on {host!r}: {protocol} has no authentication, "
+                         "so only a loopback address (127.0.0.1, ::1, localhost) is allowed; pass --allow-remote "
+                         "to serve on another interface")
+    if not 0 <= port <= 65535:
+        raise ValueError(f"port must be 0..65535 (0 = any free port), got {port}")
+
+
 def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remote: bool,
                       announce: Callable[[str], None], stop: threading.Event, *,
                       job_folder: Path | None = None) -> None:
@@ -59,12 +73,7 @@ def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remo
     ConfigError
         A bad configuration, or one without ``[plc.simulator]``.
     """
-    if not is_loopback(host) and not allow_remote:
-        raise ValueError(f"refusing to serve the PLC simulator on {host!r}: Modbus/TCP has no authentication, "
-                         "so only a loopback address (127.0.0.1, ::1, localhost) is allowed; pass --allow-remote "
-                         "to serve on another interface")
-    if not 0 <= port <= 65535:
-        raise ValueError(f"port must be 0..65535 (0 = any free port), got {port}")
+    check_bind(host, port, allow_remote, simulator="the PLC simulator", protocol="Modbus/TCP")
     config = load_plc_config(config_path)
     if config.simulator is None:
         raise ConfigError(f"{config.source}: no [plc.simulator] table; the simulator needs the polishing model "
