@@ -78,8 +78,12 @@ def test_phase_shifting_results_match_the_simulated_surface(station_factory) -> 
         assert len(r.frame_ids) == 5 and r.coefficients and r.ordering == "noll"
     c = summary.counters  # frames and sets apart: 8 sets of 5 frames, not "processed 8" beside frame counts
     assert (c.frames_per_set, c.sets.processed, c.frames.processed) == (5, 8, 40) and c.frames.acquired >= 40
-    # the first result starts aperture 0 on a qr stand-in; the configured map arrives later
-    assert results[0].aperture.changed and results[0].fitter_fallback and results[0].fitter == "qr"
+    # the first result starts aperture 0; it is fitted on a qr stand-in unless the configured map was
+    # built before the first set was through (a loaded machine: the first result 5 s late), and a
+    # stand-in is always named as one
+    first = results[0]
+    assert first.aperture.changed
+    assert first.fitter == "qr" if first.fitter_fallback else first.fitter != "qr"
 
 
 def test_carrier_results_match_the_simulated_surface(station_factory) -> None:
