@@ -184,12 +184,17 @@ class AlignmentLoop:
         r.record = None
 
     def _halt(self) -> bool:
-        try:
-            self._hexapod.stop_all()
-            return True
-        except (DeviceError, OSError) as error:
-            logger.error("align: halting the hexapod failed: %s", error)
-            return False
+        """Stop the hexapod (``#24``); after a lost connection reconnect once and stop again."""
+        for attempt in range(2):
+            try:
+                if attempt:
+                    self._hexapod.close()
+                    self._hexapod.open()
+                self._hexapod.stop_all()
+                return True
+            except (DeviceError, OSError) as error:
+                logger.error("align: halting the hexapod failed (attempt %d): %s", attempt + 1, error)
+        return False
 
     # ------------------------------------------------------------------ phases
     def _move_field(self, r: _Run) -> tuple[AlignEvent, str]:
