@@ -140,3 +140,38 @@ class AlignmentBench:
                 noise = self._rng.normal(0.0, self._noise, waves.shape)
             waves = waves + noise
         return BenchFrame(waves, field, pose, exposure)
+
+
+class SurfaceCoupling:
+    """Puts the bench's wavefront on a station test optic's surface, so the station's camera sees it.
+
+    The station's simulated interferometer renders its :class:`~wavestack.simulators.optic.TestOptic`
+    (zero Zernike figure) plus the optic's surface, ``W = reflection_factor * heights /
+    wavelength_nm``; :meth:`refresh` sets the heights to ``wavefront * wavelength_nm /
+    reflection_factor`` (zero outside the pupil) through the surface's own
+    ``apply_removal`` (one revision per refresh), so the frames rendered after it show the
+    field point and hexapod pose of that moment. The optic's grid must be the TMA's camera grid.
+
+    Parameters
+    ----------
+    bench : AlignmentBench
+    surface : SurfaceState
+        The station optic's surface (``devices.bench.optic.surface``).
+    wavelength_nm, reflection_factor : float
+        As the optic's ``[optic.surface]`` converts heights to waves.
+    """
+
+    def __init__(self, bench: AlignmentBench, surface, wavelength_nm: float,  # noqa: ANN001
+                 reflection_factor: float) -> None:
+        if surface is None or tuple(surface.shape) != tuple(bench.truth.design.camera_shape):
+            raise ValueError(f"surface: expected the station optic's surface on the TMA grid "
+                             f"{bench.truth.design.camera_shape}, got {None if surface is None else surface.shape}")
+        self._bench, self._surface = bench, surface
+        self._nm_per_wave = float(wavelength_nm) / float(reflection_factor)
+
+    def refresh(self) -> BenchFrame:
+        """Render the wavefront now and put it on the surface; returns the frame (its time is the refresh's)."""
+        frame = self._bench.wavefront()
+        target = np.nan_to_num(frame.waves, nan=0.0) * self._nm_per_wave
+        self._surface.apply_removal(self._surface.heights_nm() - target)
+        return frame

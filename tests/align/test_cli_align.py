@@ -40,8 +40,14 @@ def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str], args: list[str],
 
 
 def test_the_shipped_bench_is_the_repository_example() -> None:
-    assert filecmp.cmp(ROOT / "config" / "tma-alignment.toml", ROOT / "wavestack" / "config" / "tma-alignment.toml",
-                       shallow=False)
+    name = "tma-alignment.toml"
+    assert filecmp.cmp(ROOT / "config" / name, ROOT / "wavestack" / "config" / name, shallow=False)
+
+
+def test_the_shipped_alignment_station_validates() -> None:
+    from wavestack.config.station import load_station_config
+    config = load_station_config(ROOT / "wavestack" / "config" / "tma-alignment-station.toml")
+    assert (config.camera_simulator.height, config.camera_simulator.width) == (128, 256)
 
 
 def test_one_iteration_prints_json_and_records(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:

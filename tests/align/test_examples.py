@@ -9,7 +9,7 @@ import pytest
 
 MODULES = ("wavestack.align.state", "wavestack.align.terms", "wavestack.align.sensitivity",
            "wavestack.align.estimator", "wavestack.align.correction", "wavestack.align.recorder",
-           "wavestack.simulators.align_bench")
+           "wavestack.simulators.align_bench", "wavestack.align.station_source")
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -4,7 +4,8 @@
 loopback, the as-built telescope with a seeded mount error, :mod:`wavestack.simulators.align_bench`),
 opens the hexapod and field-stage drivers on them, and builds what :class:`~.loop.AlignmentLoop`
 takes: the design model, the fitter on the pupil's aperture, the field stage's target per field
-point and the measurement (``averaged`` renders of the bench averaged at one field point). A real
+point and the measurement (the bench's wavefront maps, or with ``[align] station`` the station's
+maps through the simulated camera, :mod:`.station_source`). A real
 bench (``simulated = false``) needs an interferometer source wired here: not done yet (the
 session refuses it with a message).
 """
@@ -18,6 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from wavestack.align.loop import AlignOptions, FieldMeasurement
+from wavestack.align.station_source import StationSource, fixed_aperture
 from wavestack.align.terms import TermFitter
 from wavestack.config.align import AlignConfig
 from wavestack.config.hexapod import build_hexapod
@@ -41,9 +43,13 @@ class AlignSession:
     design: TmaModel
     fitter: TermFitter
     field_positions: list[dict[str, float]]
+    station: StationSource | None = None
 
     def measure(self, index: int, averaged: int = 1) -> FieldMeasurement:
-        """Average ``averaged`` renders at the field point the stage holds (``index`` is for messages)."""
+        """Measure at the field point the stage holds: through the station when configured, else the
+        average of ``averaged`` renders of the bench (``index`` is for messages)."""
+        if self.station is not None:
+            return self.station.measure(index)
         frames = [self.bench.wavefront() for _ in range(averaged)]
         waves = np.mean([f.waves for f in frames], axis=0)
         return FieldMeasurement(waves, frames[0].exposure_ns)
@@ -102,9 +108,16 @@ def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | 
     hexapod = _driver(config.hexapod, bench.hexapod.port, stack)
     stage = _driver(config.field_stage, bench.field_stage.port, stack)
     design = TmaModel(config.design)
-    fitter = TermFitter(design.pupil_mask, config.align.max_noll)
+    station_path = config.station_path()
+    station = None
+    if station_path is None:
+        fitter = TermFitter(design.pupil_mask, config.align.max_noll)
+    else:  # the station's detected aperture loses rim pixels: both fits on the pupil less edge_px
+        mask = fixed_aperture(design.pupil_mask, config.align.edge_px)
+        fitter = TermFitter(mask, config.align.max_noll)
+        station = StationSource(station_path, bench, mask, stack, averaged=config.align.averaged)
     scale = config.align.field_stage_mm_per_deg
     positions = [dict(zip(config.field_stage.axes, (fx * scale, fy * scale)))
                  for fx, fy in config.design.field_points_deg]
     logger.info("align: simulated bench, mount error %s (unknown to the loop)", mount.as_tuple())
-    return AlignSession(bench, hexapod, stage, design, fitter, positions)
+    return AlignSession(bench, hexapod, stage, design, fitter, positions, station)

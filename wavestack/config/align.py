@@ -55,6 +55,11 @@ class AlignSettings:
     field_stage_mm_per_deg: float = setting(10.0, minimum=1e-3, maximum=1e3,
                                             doc="field stage travel (axes 1, 2) per degree of field")
     simulated: bool = setting(True, doc="start the simulated bench (hexapod, field stage, telescope)")
+    station: str | None = setting(None, doc="station TOML measuring through the camera (relative to this file); "
+                                            "absent: the model's wavefront maps")
+    averaged: int = setting(3, minimum=1, maximum=100, doc="valid station maps averaged per field point")
+    edge_px: int = setting(2, minimum=0, maximum=20, doc="pupil rim pixels left out of the fixed aperture "
+                                                         "(station measurements)")
     simulator: AlignBenchSettings = setting(AlignBenchSettings(), doc="[align.simulator]")
 
 
@@ -71,6 +76,12 @@ class AlignConfig:
     field_stage: HexapodSettings
     hexapod_simulator: HexapodSimSettings
     field_stage_simulator: HexapodSimSettings
+
+    def station_path(self) -> Path | None:
+        """``[align] station`` relative to this file's folder (None when absent)."""
+        if self.align.station is None:
+            return None
+        return (Path(self.source).resolve().parent / self.align.station).resolve()
 
 
 def parse_align_config(document: Mapping[str, Any], *, source: str, text: str = "") -> AlignConfig:
