@@ -1,6 +1,6 @@
 """Benchmark of the simulated TMA (batoid): one wavefront, and a finite-difference sensitivity matrix.
 
-Run:  .venv/bin/python benchmarks/bench_tma.py [--config config/tma-alignment.toml] [--repeats 30]
+Run:  .venv/bin/python benchmarks/bench_tma.py [--config wavestack/config/tma-alignment.toml] [--repeats 30]
 
 BLAS pinned to one thread. Prints the median and 99th percentile over ``--repeats`` of
 
@@ -81,7 +81,7 @@ def condition(matrix: np.ndarray) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--config", default="config/tma-alignment.toml", help="TOML file with [tma]")
+    parser.add_argument("--config", default="wavestack/config/tma-alignment.toml", help="TOML file with [tma]")
     parser.add_argument("--repeats", type=int, default=30, help="timed runs per case (default 30)")
     args = parser.parse_args()
     design, errors = load_tma_config(args.config)

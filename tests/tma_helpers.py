@@ -9,11 +9,11 @@ import numpy as np
 from wavestack.config.tma import load_tma_config
 from wavestack.pipeline.zernike import noll_to_nm, zernike_basis
 
-CONFIG = Path(__file__).resolve().parents[1] / "config" / "tma-alignment.toml"
+CONFIG = Path(__file__).resolve().parents[1] / "wavestack" / "config" / "tma-alignment.toml"
 
 
 def example():
-    """The design and as-built errors of ``config/tma-alignment.toml``."""
+    """The design and as-built errors of ``wavestack/config/tma-alignment.toml``."""
     return load_tma_config(CONFIG)
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import filecmp
 import json
 from pathlib import Path
 
@@ -37,11 +36,6 @@ def test_align_is_a_command_with_its_options() -> None:
 def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str], args: list[str], words: str) -> None:
     status, _, err = _main(capsys, *args)
     assert status == 2 and words in err
-
-
-def test_the_shipped_bench_is_the_repository_example() -> None:
-    name = "tma-alignment.toml"
-    assert filecmp.cmp(ROOT / "config" / name, ROOT / "wavestack" / "config" / name, shallow=False)
 
 
 def test_the_shipped_alignment_station_validates() -> None:

@@ -165,8 +165,8 @@ def test_every_shipped_device_file_still_validates() -> None:
     station_files = {p.name for p in STATION_FILES}
     assert {p.name for p in (ROOT / "config").glob("*.toml")} - station_files == {
         "plc-sim.toml", "plc-example.toml", "pzt-sim.toml", "pzt-mdt693b.example.toml",
-        "polishing-zygo.toml", "hexapod-sim.toml", "tma-alignment.toml"}, "a new example needs a test"
-    # polishing: tests/config/test_polishing_settings.py; hexapod: test_hexapod_settings.py; tma: test_tma_settings.py
+        "polishing-zygo.toml", "hexapod-sim.toml"}, "a new example needs a test"
+    # polishing: tests/config/test_polishing_settings.py; hexapod: test_hexapod_settings.py
 
 
 def test_a_free_running_camera_slower_than_the_timeouts_is_refused() -> None:

@@ -12,7 +12,7 @@ from wavestack.config.schema import ConfigError
 from wavestack.config.tma import load_tma_config, parse_tma_config
 from wavestack.simulators.tma import AsBuiltErrors
 
-CONFIG = Path(__file__).resolve().parents[2] / "config" / "tma-alignment.toml"
+CONFIG = Path(__file__).resolve().parents[2] / "wavestack" / "config" / "tma-alignment.toml"
 TEXT = CONFIG.read_text(encoding="utf-8")
 
 

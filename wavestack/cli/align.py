@@ -1,7 +1,7 @@
 """``wavestack align``: the closed alignment loop of an off-axis TMA on a PI hexapod.
 
 Without ``--config`` it runs the simulated alignment bench (``wavestack/config/tma-alignment.toml``,
-shipped inside the package, the same file as ``config/tma-alignment.toml``): both PI controllers
+shipped inside the package): both PI controllers
 simulated on loopback and started by the command, the as-built telescope with a seeded mount error
 the loop does not know. Per iteration it prints the RMS per field point, the estimated
 misalignment per degree of freedom, the move sent and the position read back (one JSON object per

@@ -4,7 +4,7 @@
 unknown misalignment the simulated bench starts from (:class:`AlignBenchSettings`). The telescope
 is ``[tma]`` (:mod:`wavestack.config.tma`), the hexapod ``[hexapod]`` and the field stage
 ``[field_stage]`` (:mod:`wavestack.config.hexapod`, with their ``.simulator`` tables). Example:
-``config/tma-alignment.toml``, which ``wavestack align`` runs by default.
+``wavestack/config/tma-alignment.toml`` (shipped in the package), which ``wavestack align`` runs by default.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 ``[tma]`` holds the design (:class:`~wavestack.simulators.tma.TmaDesign`): the mirrors as an array
 of tables ``[[tma.mirrors]]``, the off-axis pupil ``[tma.pupil]``, field points, wavelength, the
 aligned mirror and its pivot, the camera grid; ``[tma.as_built]`` the seeded as-built errors.
-Other top-level tables are left to their own loaders. Example: ``config/tma-alignment.toml``::
+Other top-level tables are left to their own loaders. Example: ``wavestack/config/tma-alignment.toml``::
 
     [tma]
     source = "derived ..."
