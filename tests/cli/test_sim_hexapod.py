@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import queue
 import signal
 import socket
 import subprocess
@@ -12,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from sim_serving import serve_in_thread
 from wavestack.cli.sim_hexapod import run_hexapod_simulator
 from wavestack.config.hexapod_sim import load_hexapod_sim_config, parse_hexapod_sim_config
 from wavestack.config.schema import ConfigError
@@ -41,22 +41,8 @@ def _ask(port: int, command: bytes) -> bytes:
 
 
 def test_the_simulator_announces_serves_a_plain_socket_and_stops_cleanly(example_file: Path) -> None:
-    lines: queue.Queue[str] = queue.Queue()
-    announced: list[str] = []
-    stop = threading.Event()
-
-    def announce(line: str) -> None:
-        announced.append(line)
-        lines.put(line)
-
-    thread = threading.Thread(target=run_hexapod_simulator,
-                              args=(example_file, "127.0.0.1", 0, False, announce, stop),
-                              name="hexapod-sim-runner")
-    thread.start()
+    thread, stop, port, announced = serve_in_thread(run_hexapod_simulator, example_file, "hexapod-sim-runner")
     try:
-        line = lines.get(timeout=10.0)
-        assert line.startswith("listening 127.0.0.1:")
-        port = int(line.rsplit(":", 1)[1])
         assert _ask(port, b"CSV?\n") == b"2.0\n"
         assert _ask(port, b"SAI?\n") == b"X \nY \nZ \nU \nV \nW\n"
     finally:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import queue
 import signal
 import subprocess
 import sys
@@ -12,6 +11,7 @@ from pathlib import Path
 import pytest
 from pymodbus.client import ModbusTcpClient
 
+from sim_serving import serve_in_thread
 from wavestack.config.schema import ConfigError
 from wavestack.drivers.plc import PolishingLink, decode_float32, round_to_float32
 from wavestack.config.plc import load_plc_config
@@ -23,25 +23,7 @@ CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 
 def _serve(config: Path | None) -> tuple[threading.Thread, threading.Event, int, list[str]]:
     """Run the simulator in a thread; returns the thread, its stop event, the port and every announcement."""
-    lines: queue.Queue[str] = queue.Queue()
-    announced: list[str] = []
-    stop = threading.Event()
-
-    def announce(line: str) -> None:
-        announced.append(line)
-        lines.put(line)
-
-    thread = threading.Thread(target=run_plc_simulator, args=(config, "127.0.0.1", 0, False, announce, stop),
-                              name="plc-sim-runner")
-    thread.start()
-    try:
-        line = lines.get(timeout=10.0)
-    except queue.Empty:
-        stop.set()
-        thread.join()
-        raise AssertionError("the simulator announced nothing") from None
-    assert line.startswith("listening 127.0.0.1:")
-    return thread, stop, int(line.rsplit(":", 1)[1]), announced
+    return serve_in_thread(run_plc_simulator, config, "plc-sim-runner")
 
 
 @pytest.mark.parametrize("config", [None, CONFIG_DIR / "plc-sim.toml"])
