@@ -191,6 +191,7 @@ def coefficient_bars(axes: Axes, coefficients: ArrayLike, modes: Sequence[tuple[
     total = len(np.asarray(coefficients))
     axes.set_title(title + ("" if total == shown else f" (first {shown} of {total})"), fontsize=9)
     axes.grid(axis="y", linewidth=0.3)
+    axes.set_axisbelow(True)  # the grid behind the bars
     return values
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
@@ -53,6 +54,13 @@ def mesh_limits(views: Sequence[PaperViews]) -> tuple[float, float]:
     return symmetric_limits(*(log_area_scale(v) for v in _mapped(views)))
 
 
+def _column_pairs(figure: Figure, columns: int) -> list[tuple[Axes, Axes]]:
+    """A top and a bottom panel per column, all made before any colour bar so that ``figure.axes``
+    starts with them in that order."""
+    grid = figure.add_gridspec(2, columns)
+    return [(figure.add_subplot(grid[0, k]), figure.add_subplot(grid[1, k])) for k in range(columns)]
+
+
 def mesh_figure(views: Sequence[PaperViews]) -> Figure:
     """Fig. 3 of the seed paper for one aperture: meshes and their canonical images.
 
@@ -67,17 +75,17 @@ def mesh_figure(views: Sequence[PaperViews]) -> Figure:
     if not mapped:
         raise ValueError("mesh figure: expected at least one mapped method (conformal or csf-qcm)")
     figure = new_figure(3.8 * len(mapped), 7.0)
-    grid = figure.add_gridspec(2, len(mapped))
+    panels = _column_pairs(figure, len(mapped))
     norm = Normalize(*mesh_limits(mapped))
     unit = "log10 area scale s (0: mean scale)"
-    for k, view in enumerate(mapped):
+    for (top, bottom), view in zip(panels, mapped):
         m = view.mapping
         spread = np.percentile(m.area_scale, 95) / max(np.percentile(m.area_scale, 5), AREA_SCALE_FLOOR)
         values = log_area_scale(view)
-        mesh_panel(figure, figure.add_subplot(grid[0, k]), m.vertices, m.triangles, values, norm=norm,
+        mesh_panel(figure, top, m.vertices, m.triangles, values, norm=norm,
                    cmap=SIGNED_CMAP, title=f"{view.label}: mesh, s95/s5 {spread:.3g}", unit=unit,
                    axis_labels=_PHYSICAL)
-        mesh_panel(figure, figure.add_subplot(grid[1, k]), m.canonical, m.triangles, values, norm=norm,
+        mesh_panel(figure, bottom, m.canonical, m.triangles, values, norm=norm,
                    cmap=SIGNED_CMAP, title=f"{view.label}: image"
                    + ("" if m.r_in is None else f", r_in = {m.r_in:.3f}"), unit=unit, axis_labels=_CANONICAL)
     figure.suptitle(f"{mapped[0].aperture}: meshes (top) and their canonical images (bottom), "
@@ -99,14 +107,12 @@ def beltrami_figure(views: Sequence[PaperViews]) -> Figure:
     if not mapped:
         raise ValueError("Beltrami figure: expected at least one mapped method (conformal or csf-qcm)")
     figure = new_figure(3.8 * len(mapped), 7.0)
-    grid = figure.add_gridspec(2, len(mapped))
-    for k, view in enumerate(mapped):
+    for (top, histogram), view in zip(_column_pairs(figure, len(mapped)), mapped):
         m = view.mapping
-        mesh_panel(figure, figure.add_subplot(grid[0, k]), m.vertices, m.triangles, m.beltrami,
+        mesh_panel(figure, top, m.vertices, m.triangles, m.beltrami,
                    norm=Normalize(0.0, 1.0), cmap=MAGNITUDE_CMAP, edges=False,
                    title=f"{view.label}: |mu|, max {np.max(m.beltrami):.3f}", unit="|mu| (dimensionless)",
                    axis_labels=_PHYSICAL)
-        histogram = figure.add_subplot(grid[1, k])
         histogram.hist(np.clip(m.beltrami, 0.0, 1.0), bins=BELTRAMI_BINS, color=BAR_COLOUR)
         histogram.set_title(f"{view.label}: p95 {np.percentile(m.beltrami, 95):.3f}", fontsize=8)
         histogram.set_xlabel("|mu| (dimensionless; > 1 clipped to 1)")
