@@ -80,6 +80,9 @@ def test_a_bad_plot_path_is_one_line_before_any_work(capsys, tmp_path, command, 
 
 
 def test_plots_options_where_they_do_not_apply(capsys, tmp_path) -> None:
+    assert main(["analyze", str(tmp_path / "spots.png"), "--reference", str(tmp_path / "ref.png"),
+                 "--plot", str(tmp_path / "out.png")]) == 2
+    assert "--plot draws interferograms and measured maps, not a Shack-Hartmann" in capsys.readouterr().err
     assert main(["bench", "station", "--plots", str(tmp_path)]) == 2
     assert "--plots applies to 'bench paper' only" in capsys.readouterr().err
     assert main(["bench", "paper", "--size", "8"]) == 2

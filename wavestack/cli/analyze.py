@@ -127,13 +127,7 @@ def _apply_null_test(args: argparse.Namespace, test: ConicTest, aperture: Apertu
 def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack analyze``; returns the exit status."""
     if shack_hartmann(args):
-        if args.mask is not None or args.aperture != "detected":
-            raise InputError(f"{args.files[0]}: --aperture and --mask apply to interferograms, not to a "
-                             "Shack-Hartmann spot image (its pupil is --pupil-px)")
-        if args.plot is not None:
-            raise InputError(f"{args.files[0]}: --plot draws interferograms and measured maps, not a "
-                             "Shack-Hartmann spot image; expected --plot without the Shack-Hartmann options")
-        return run_shack_hartmann(args)
+        return _spot_image(args)
     save_to = check_output_file(args.save_map, "--save-map") if args.save_map else None
     plot_to = check_output_file(args.plot, "--plot") if args.plot else None
     try:
@@ -190,6 +184,17 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         write_fit_figure(fit_view(_subject(args), "waves", fitter, result), plot_to)
     print(json_text(report) if args.json else _format(report))
     return 0
+
+
+def _spot_image(args: argparse.Namespace) -> int:
+    """A Shack-Hartmann spot image, once the interferogram-only options are known to be absent."""
+    if args.mask is not None or args.aperture != "detected":
+        raise InputError(f"{args.files[0]}: --aperture and --mask apply to interferograms, not to a "
+                         "Shack-Hartmann spot image (its pupil is --pupil-px)")
+    if args.plot is not None:
+        raise InputError(f"{args.files[0]}: --plot draws interferograms and measured maps, not a "
+                         "Shack-Hartmann spot image; expected --plot without the Shack-Hartmann options")
+    return run_shack_hartmann(args)
 
 
 def _subject(args: argparse.Namespace) -> str:

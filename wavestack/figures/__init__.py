@@ -25,6 +25,7 @@ from wavestack.figures.drawing import (
     SIGNED_CMAP,
     aperture_outline,
     coefficient_bars,
+    data_limits,
     map_panel,
     mesh_panel,
     mode_label,
@@ -45,7 +46,7 @@ from wavestack.figures.replay_figures import last_map_figure, latency_figure, wr
 __all__ = [
     "AREA_SCALE_FLOOR", "BAR_COLOUR", "BELTRAMI_BINS", "DPI", "FIT_FIGURE_INCHES", "FitView", "GRAM_FLOOR",
     "LEADING_MODES", "MAGNITUDE_CMAP", "MAX_BARS", "ReplayCollector", "ReplaySeries", "SIGNED_CMAP",
-    "aperture_outline", "beltrami_figure", "check_plot_folder", "coefficient_bars", "coefficient_figure", "ecdf",
+    "aperture_outline", "beltrami_figure", "check_plot_folder", "coefficient_bars", "coefficient_figure", "data_limits", "ecdf",
     "ecdf_figure", "error_figure", "fit_figure", "gram_figure", "gram_norm", "last_map_figure", "latency_figure",
     "log_area_scale", "map_panel", "mesh_figure", "mesh_limits", "mesh_panel", "mode_label", "new_figure",
     "pixel_extent", "save_figure", "symmetric_limits", "write_fit_figure", "write_paper_figures",

@@ -24,7 +24,8 @@ from numpy.typing import ArrayLike, NDArray
 from wavestack.pipeline import mode_name
 
 __all__ = [
-    "BAR_COLOUR", "DPI", "MAGNITUDE_CMAP", "MAX_BARS", "SIGNED_CMAP", "aperture_outline", "coefficient_bars", "map_panel",
+    "BAR_COLOUR", "DPI", "MAGNITUDE_CMAP", "MAX_BARS", "SIGNED_CMAP", "aperture_outline", "coefficient_bars",
+    "data_limits", "map_panel",
     "mesh_panel", "mode_label", "new_figure", "pixel_extent", "save_figure", "symmetric_limits",
 ]
 
@@ -84,6 +85,24 @@ def symmetric_limits(*maps: ArrayLike) -> tuple[float, float]:
             bound = max(bound, float(np.max(np.abs(finite))))
     bound = bound if math.isfinite(bound) and bound > 0 else 1.0
     return -bound, bound
+
+
+def data_limits(data: ArrayLike) -> tuple[float, float]:
+    """Colour limits spanning the finite values of ``data`` (``(0, 1)`` if there are none; widened if flat).
+
+    For maps read on their own range rather than against zero (a dwell density, a height map).
+
+    Example
+    -------
+    >>> data_limits([2.0, np.nan, 5.0])
+    (2.0, 5.0)
+    """
+    array = np.asarray(data, dtype=np.float64)
+    finite = array[np.isfinite(array)]
+    if finite.size == 0:
+        return 0.0, 1.0
+    low, high = float(finite.min()), float(finite.max())
+    return (low, high) if high > low else (low - 0.5, high + 0.5)
 
 
 def pixel_extent(shape: tuple[int, int]) -> tuple[float, float, float, float]:
