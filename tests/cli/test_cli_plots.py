@@ -91,7 +91,10 @@ def test_plots_options_where_they_do_not_apply(capsys, tmp_path) -> None:
     afile.write_text("x")
     assert main(["bench", "paper", "--plots", str(afile)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "names a file, not a folder" in err
+    assert err.count("\n") == 1 and f"--plots {afile}: not a folder" in err
+    assert main(["replay", str(tmp_path / "absent.h5"), "--plots", str(tmp_path / "no" / "such")]) == 2
+    err = capsys.readouterr().err  # the folder is checked before the recording is opened
+    assert err.count("\n") == 1 and "does not exist or is not writable" in err
 
 
 @pytest.mark.slow

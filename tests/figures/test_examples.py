@@ -7,8 +7,8 @@ import importlib
 
 import pytest
 
-MODULES = ("wavestack.figures.drawing", "wavestack.figures.fit_figure", "wavestack.figures.folder",
-           "wavestack.figures.paper_stats", "wavestack.figures.replay_figures")
+MODULES = ("wavestack.figures.drawing", "wavestack.figures.fit_figure", "wavestack.figures.paper_stats",
+           "wavestack.figures.replay_figures")
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -21,7 +21,8 @@ from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.outputs import json_text
 from wavestack.config import load_station_config
-from wavestack.figures import check_plot_folder, write_paper_figures
+from wavestack.cli.polish import check_plots_folder
+from wavestack.figures import write_paper_figures
 from wavestack.pipeline import InputError
 
 # Fewer samples across cannot hold 36 modes on the thinnest paper aperture (the rounded rectangle is
@@ -59,10 +60,11 @@ def run_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         raise InputError("--config applies to 'bench station' only, not to 'bench paper'")
     if args.size < _SMALLEST_SIZE:
         raise InputError(f"bench paper: --size {args.size}: expected at least {_SMALLEST_SIZE} samples across")
-    folder = check_plot_folder(args.plots, "--plots") if args.plots is not None else None
+    folder = check_plots_folder(args.plots) if args.plots is not None else None
     cases = run_paper_cases(tuple(args.aperture) if args.aperture else None, args.size, keep_views=folder is not None)
     rows = [case.row for case in cases]
     if folder is not None:
+        folder.mkdir(exist_ok=True)
         write_paper_figures([case.views for case in cases if case.views is not None], folder)
     if args.json:
         print(json_text({"benchmark": "paper", "rows": rows_as_json(rows)}))

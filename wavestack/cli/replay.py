@@ -11,7 +11,8 @@ from wavestack.cli.outputs import json_text
 from wavestack.recording import RecordingReader
 from wavestack.recording.replay import ReplayedResult, SkippedSet, recorded_config, replay
 from wavestack.config import load_station_config
-from wavestack.figures import ReplayCollector, check_plot_folder, write_replay_figures
+from wavestack.cli.polish import check_plots_folder
+from wavestack.figures import ReplayCollector, write_replay_figures
 
 
 def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,7 +33,7 @@ def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     """Replay a recording; returns the exit status (2 when it is damaged, after replaying what is intact)."""
     out = sys.stdout
     tally = _Tally()
-    folder = check_plot_folder(args.plots, "--plots") if args.plots is not None else None
+    folder = check_plots_folder(args.plots) if args.plots is not None else None
     collector = ReplayCollector()
     with RecordingReader(args.recording) as reader:
         config = load_station_config(args.config) if args.config else recorded_config(reader, args.recording)
@@ -46,6 +47,7 @@ def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
                 collector.add(item)
         damage, notes = [str(d) for d in reader.damage], list(reader.notes)
         if folder is not None:
+            folder.mkdir(exist_ok=True)
             write_replay_figures(collector.series(str(args.recording), reader.results(), reader.conventions), folder)
     summary = tally.summary() | {"damage": damage, "notes": notes}
     if args.json:

@@ -35,7 +35,6 @@ from wavestack.figures.drawing import (
     symmetric_limits,
 )
 from wavestack.figures.fit_figure import FIT_FIGURE_INCHES, FitView, fit_figure, write_fit_figure
-from wavestack.figures.folder import check_plot_folder
 from wavestack.figures.paper_figures import write_paper_figures
 from wavestack.figures.paper_maps import AREA_SCALE_FLOOR, BELTRAMI_BINS, beltrami_figure, error_figure
 from wavestack.figures.paper_maps import log_area_scale, mesh_figure, mesh_limits
@@ -46,7 +45,7 @@ from wavestack.figures.replay_figures import last_map_figure, latency_figure, wr
 __all__ = [
     "AREA_SCALE_FLOOR", "BAR_COLOUR", "BELTRAMI_BINS", "DPI", "FIT_FIGURE_INCHES", "FitView", "GRAM_FLOOR",
     "LEADING_MODES", "MAGNITUDE_CMAP", "MAX_BARS", "ReplayCollector", "ReplaySeries", "SIGNED_CMAP",
-    "aperture_outline", "beltrami_figure", "check_plot_folder", "coefficient_bars", "coefficient_figure", "data_limits", "ecdf",
+    "aperture_outline", "beltrami_figure", "coefficient_bars", "coefficient_figure", "data_limits", "ecdf",
     "ecdf_figure", "error_figure", "fit_figure", "gram_figure", "gram_norm", "last_map_figure", "latency_figure",
     "log_area_scale", "map_panel", "mesh_figure", "mesh_limits", "mesh_panel", "mode_label", "new_figure",
     "pixel_extent", "save_figure", "symmetric_limits", "write_fit_figure", "write_paper_figures",
