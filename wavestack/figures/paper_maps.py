@@ -54,17 +54,9 @@ def mesh_limits(views: Sequence[PaperViews]) -> tuple[float, float]:
     return symmetric_limits(*(log_area_scale(v) for v in _mapped(views)))
 
 
-def _column_pairs(figure: Figure, columns: int) -> list[tuple[Axes, Axes]]:
-    """A top and a bottom panel per column, all made before any colour bar so that ``figure.axes``
-    starts with them in that order."""
-    grid = figure.add_gridspec(2, columns)
-    return [(figure.add_subplot(grid[0, k]), figure.add_subplot(grid[1, k])) for k in range(columns)]
-
-
-def mesh_figure(views: Sequence[PaperViews]) -> Figure:
-    """Fig. 3 of the seed paper for one aperture: meshes and their canonical images.
-
-    ``figure.axes`` starts with, per mapped method, the physical panel then the canonical one.
+def _two_rows(views: Sequence[PaperViews], what: str) -> tuple[list[PaperViews], Figure, list[tuple[Axes, Axes]]]:
+    """The mapped views, and a figure with a top and a bottom panel for each, made before any colour
+    bar so that ``figure.axes`` starts with them in that order.
 
     Raises
     ------
@@ -73,9 +65,20 @@ def mesh_figure(views: Sequence[PaperViews]) -> Figure:
     """
     mapped = _mapped(views)
     if not mapped:
-        raise ValueError("mesh figure: expected at least one mapped method (conformal or csf-qcm)")
+        raise ValueError(f"{what}: expected at least one mapped method (conformal or csf-qcm)")
     figure = new_figure(3.8 * len(mapped), 7.0)
-    panels = _column_pairs(figure, len(mapped))
+    grid = figure.add_gridspec(2, len(mapped))
+    return mapped, figure, [(figure.add_subplot(grid[0, k]), figure.add_subplot(grid[1, k]))
+                            for k in range(len(mapped))]
+
+
+def mesh_figure(views: Sequence[PaperViews]) -> Figure:
+    """Fig. 3 of the seed paper for one aperture: meshes and their canonical images.
+
+    ``figure.axes`` starts with, per mapped method, the physical panel then the canonical one.
+    A ValueError if no view has a canonical map.
+    """
+    mapped, figure, panels = _two_rows(views, "mesh figure")
     norm = Normalize(*mesh_limits(mapped))
     unit = "log10 area scale s (0: mean scale)"
     for (top, bottom), view in zip(panels, mapped):
@@ -96,18 +99,11 @@ def mesh_figure(views: Sequence[PaperViews]) -> Figure:
 def beltrami_figure(views: Sequence[PaperViews]) -> Figure:
     """Fig. 5 of the seed paper for one aperture: ``|mu|`` maps (top) and histograms (bottom).
 
-    ``figure.axes`` starts with, per mapped method, the map then the histogram.
-
-    Raises
-    ------
-    ValueError
-        If no view has a canonical map.
+    ``figure.axes`` starts with, per mapped method, the map then the histogram. A ValueError if
+    no view has a canonical map.
     """
-    mapped = _mapped(views)
-    if not mapped:
-        raise ValueError("Beltrami figure: expected at least one mapped method (conformal or csf-qcm)")
-    figure = new_figure(3.8 * len(mapped), 7.0)
-    for (top, histogram), view in zip(_column_pairs(figure, len(mapped)), mapped):
+    mapped, figure, panels = _two_rows(views, "Beltrami figure")
+    for (top, histogram), view in zip(panels, mapped):
         m = view.mapping
         mesh_panel(figure, top, m.vertices, m.triangles, m.beltrami,
                    norm=Normalize(0.0, 1.0), cmap=MAGNITUDE_CMAP, edges=False,
