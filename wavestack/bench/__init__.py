@@ -6,7 +6,8 @@ example and the numerical benchmarks use them.
 
 from __future__ import annotations
 
-from wavestack.bench.paper import PaperRow, format_markdown, rows_as_json, run_paper_benchmark
+from wavestack.bench.paper import PaperCase, PaperRow, format_markdown, rows_as_json, run_paper_benchmark, run_paper_cases
+from wavestack.bench.paper_views import MapView, PaperViews
 from wavestack.bench.paper_apertures import (
     PAPER_APERTURES,
     annulus_circular_hole_mask,
@@ -19,8 +20,10 @@ from wavestack.bench.station import carrier_config, changed_aperture, machine_st
 from wavestack.bench.station_figures import STAGES, MachineState, StationPathFigures, figures_json, format_figures, targets
 
 __all__ = [
-    "MachineState", "PAPER_APERTURES", "PaperRow", "STAGES", "StationPathFigures", "annulus_circular_hole_mask",
+    "MachineState", "MapView", "PAPER_APERTURES", "PaperCase", "PaperRow", "PaperViews", "STAGES",
+    "StationPathFigures", "annulus_circular_hole_mask",
     "annulus_triangular_hole_mask", "butterfly_mask", "carrier_config", "changed_aperture", "figures_json",
     "format_figures", "format_markdown", "machine_state", "measure_path", "rectangle_mask",
-    "rounded_rectangle_mask", "rows_as_json", "run_paper_benchmark", "targets",
+    "rounded_rectangle_mask", "rows_as_json", "run_paper_benchmark",
+    "run_paper_cases", "targets",
 ]

@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.bench.paper_apertures import PAPER_APERTURES
+from wavestack.bench.paper_views import PaperViews, paper_views
 from wavestack.pipeline import Aperture, Pupil, build_fitter, mode_list, zernike_basis
 from wavestack.pipeline import MappingOptions, Samples, build_canonical_map, mapped_columns
 
@@ -82,9 +83,14 @@ class PaperRow:
     @property
     def label(self) -> str:
         """Method name with its weights where they matter."""
-        if self.method != "csf-qcm":
-            return self.method
-        return f"csf-qcm ({self.laplacian}{', balanced' if self.angular_balance else ''})"
+        return self.label_of(self.method, self.laplacian, self.angular_balance)
+
+    @staticmethod
+    def label_of(method: str, laplacian: str, angular_balance: bool) -> str:
+        """``'csf-qcm (cotangent, balanced)'``: a method's name with its weights where they matter."""
+        if method != "csf-qcm":
+            return method
+        return f"csf-qcm ({laplacian}{', balanced' if angular_balance else ''})"
 
 
 def _truths(aperture: Aperture, seed: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -101,11 +107,16 @@ def _truths(aperture: Aperture, seed: int) -> tuple[NDArray[np.float64], NDArray
             TRUTH_PV_WAVES * smooth / np.ptp(smooth))
 
 
-def _fit_error(fitter, aperture: Aperture, values: NDArray[np.float64], truth: NDArray[np.float64]) -> tuple[float, float]:
+def _reconstruction(fitter, aperture: Aperture, values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The fitted surface of ``values`` (on the aperture's pixels), on the same pixels."""
     rows, cols = np.nonzero(aperture.mask)
     frame = np.full(aperture.shape, np.nan)
     frame[rows, cols] = values
-    error = fitter.surface(fitter.fit(frame).coefficients)[rows, cols] - truth
+    return fitter.surface(fitter.fit(frame).coefficients)[rows, cols]
+
+
+def _fit_error(fitter, aperture: Aperture, values: NDArray[np.float64], truth: NDArray[np.float64]) -> tuple[float, float]:
+    error = _reconstruction(fitter, aperture, values) - truth
     return float(np.sqrt(np.mean(error**2))), float(np.ptp(error))
 
 
@@ -120,8 +131,42 @@ def _basis_change(aperture: Aperture, method: str, laplacian: str, balance: bool
     return float(np.linalg.norm(coarse - fine) / np.linalg.norm(fine))
 
 
+@dataclass(frozen=True, eq=False)
+class PaperCase:
+    """A row of the benchmark and, when asked for, what its figures show.
+
+    Attributes
+    ----------
+    row : PaperRow
+    views : PaperViews or None
+        The fitter's map, Gram matrix and the first seed's truth and error (``bench paper --plots``).
+    """
+
+    row: PaperRow
+    views: PaperViews | None = None
+
+
 def benchmark_row(name: str, method: str, laplacian: str, balance: bool, size: int = 512) -> PaperRow:
     """Measure one aperture with one method (see the module docstring)."""
+    return benchmark_case(name, method, laplacian, balance, size).row
+
+
+def benchmark_case(name: str, method: str, laplacian: str, balance: bool, size: int = 512, *,
+                   keep_views: bool = False) -> PaperCase:
+    """Measure one aperture with one method; with ``keep_views``, keep what the figures show.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`PAPER_APERTURES`.
+    method, laplacian : str
+    balance : bool
+        Angular balance of the CSF-QCM map.
+    size : int
+        Samples across the aperture grid (the paper's 512).
+    keep_views : bool
+        Also return :class:`PaperViews` (maps of the aperture's size, the Gram matrix, the mesh).
+    """
     aperture = Aperture.from_mask(PAPER_APERTURES[name](size))
     started = time.perf_counter()
     fitter = build_fitter(
@@ -131,9 +176,13 @@ def benchmark_row(name: str, method: str, laplacian: str, balance: bool, size: i
     build_seconds = time.perf_counter() - started
     d = fitter.diagnostics
     physical, smooth, noisy = [], [], []
+    views = None
     for seed in SEEDS:
         truth, smooth_truth = _truths(aperture, seed)
         physical.append(_fit_error(fitter, aperture, truth, truth))
+        if keep_views and views is None:
+            label = PaperRow.label_of(method, laplacian, balance)
+            views = paper_views(name, label, aperture, fitter, truth, _reconstruction(fitter, aperture, truth))
         smooth.append(_fit_error(fitter, aperture, smooth_truth, smooth_truth))
         noise = np.random.default_rng(100 + seed).normal(0, NOISE_RMS_WAVES, truth.size)
         noisy.append(_fit_error(fitter, aperture, truth + noise, truth)[0])
@@ -141,7 +190,7 @@ def benchmark_row(name: str, method: str, laplacian: str, balance: bool, size: i
     rows, cols = np.nonzero(aperture.mask)
     canonical_rms = _fit_error(fitter, aperture, own[rows, cols], own[rows, cols])[0]
     mapped = method in ("conformal", "csf-qcm")
-    return PaperRow(
+    return PaperCase(PaperRow(
         aperture=name,
         method=method,
         laplacian=laplacian,
@@ -161,17 +210,24 @@ def benchmark_row(name: str, method: str, laplacian: str, balance: bool, size: i
         basis_change=_basis_change(aperture, method, laplacian, balance) if mapped else None,
         build_seconds=build_seconds,
         timings={k: float(v) for k, v in d.timings.items()},
-    )
+    ), views)
 
 
 def run_paper_benchmark(apertures: tuple[str, ...] | None = None, size: int = 512) -> list[PaperRow]:
     """Every aperture with every method; returns the rows in table order."""
-    rows = []
+    return [case.row for case in run_paper_cases(apertures, size)]
+
+
+def run_paper_cases(apertures: tuple[str, ...] | None = None, size: int = 512, *,
+                    keep_views: bool = False) -> list[PaperCase]:
+    """Every aperture with every method, in table order; with ``keep_views``, what the figures show.
+    """
+    cases = []
     for name in apertures or tuple(PAPER_APERTURES):
         for method, laplacian, balance in METHODS:
             logger.info("bench paper: %s, %s (%s, balance %s)", name, method, laplacian, balance)
-            rows.append(benchmark_row(name, method, laplacian, balance, size))
-    return rows
+            cases.append(benchmark_case(name, method, laplacian, balance, size, keep_views=keep_views))
+    return cases
 
 
 def _number(value: float | None, digits: str = ".3g") -> str:

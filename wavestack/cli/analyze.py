@@ -18,7 +18,8 @@ from wavestack.cli.analyze_aperture import add_aperture_arguments, aperture_choi
 from wavestack.cli.analyze_aperture import format_aperture, refuse_for_measured_map
 from wavestack.cli.analyze_sh import add_shack_hartmann_arguments, requested as shack_hartmann, run_shack_hartmann
 from wavestack.cli.arguments import finite_float, positive_finite_float, wavelength_nm
-from wavestack.cli.fit import MODES_ARGUMENT
+from wavestack.cli.fit import MODES_ARGUMENT, fit_view
+from wavestack.figures import write_fit_figure
 from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
 from wavestack.cli.command import Command
 from wavestack.cli.measured_map import ANALYZE_FLAGS, MapPixels, add_fit_method_argument, advised, fit_mask_of
@@ -64,6 +65,8 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--diameter-mm", type=positive_finite_float, help="diameter of the analysed aperture, mm")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--save-map", metavar="OUT.npy", help="save the analysed wavefront (waves, NaN outside)")
+    parser.add_argument("--plot", metavar="OUT.png",
+                        help="draw the measured, fitted and residual maps and the coefficients (PNG)")
     add_aperture_arguments(parser)
     add_shack_hartmann_arguments(parser)
 
@@ -124,11 +127,9 @@ def _apply_null_test(args: argparse.Namespace, test: ConicTest, aperture: Apertu
 def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack analyze``; returns the exit status."""
     if shack_hartmann(args):
-        if args.mask is not None or args.aperture != "detected":
-            raise InputError(f"{args.files[0]}: --aperture and --mask apply to interferograms, not to a "
-                             "Shack-Hartmann spot image (its pupil is --pupil-px)")
-        return run_shack_hartmann(args)
+        return _spot_image(args)
     save_to = check_output_file(args.save_map, "--save-map") if args.save_map else None
+    plot_to = check_output_file(args.plot, "--plot") if args.plot else None
     try:
         measured, wavelength_nm, pixels = _measure(args)
     except InputError:
@@ -179,8 +180,21 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if result.removed is not None:
         report["removed"] = result.removed.as_dict()
     map_report(report, pixels, result.valid_count)
+    if plot_to is not None:
+        write_fit_figure(fit_view(_subject(args), "waves", fitter, result), plot_to)
     print(json_text(report) if args.json else _format(report))
     return 0
+
+
+def _spot_image(args: argparse.Namespace) -> int:
+    """A Shack-Hartmann spot image, once the interferogram-only options are known to be absent."""
+    if args.mask is not None or args.aperture != "detected":
+        raise InputError(f"{args.files[0]}: --aperture and --mask apply to interferograms, not to a "
+                         "Shack-Hartmann spot image (its pupil is --pupil-px)")
+    if args.plot is not None:
+        raise InputError(f"{args.files[0]}: --plot draws interferograms and measured maps, not a "
+                         "Shack-Hartmann spot image; expected --plot without the Shack-Hartmann options")
+    return run_shack_hartmann(args)
 
 
 def _subject(args: argparse.Namespace) -> str:

@@ -14,14 +14,21 @@ from wavestack.bench import (
     machine_state,
     measure_path,
     rows_as_json,
-    run_paper_benchmark,
+    run_paper_cases,
     targets,
 )
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.outputs import json_text
 from wavestack.config import load_station_config
+from wavestack.cli.polish import check_plots_folder
+from wavestack.figures import write_paper_figures
 from wavestack.pipeline import InputError
+
+# Fewer samples across cannot hold 36 modes on the thinnest paper aperture (the rounded rectangle is
+# a quarter as tall as wide): 32 across leaves ~150 pixels, four per mode.
+_SMALLEST_SIZE = 32
+
 
 def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``wavestack bench``."""
@@ -32,6 +39,10 @@ def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
         "--aperture", action="append", choices=tuple(PAPER_APERTURES),
         help="paper only: only this aperture (repeatable; default: all)",
     )
+    parser.add_argument("--plots", metavar="DIR",
+                        help="paper only: also draw the seed paper's figures into DIR (made if missing)")
+    parser.add_argument("--size", type=positive_int, default=512, metavar="N",
+                        help="paper only: samples across each aperture's grid (default 512, the paper's)")
     station = parser.add_argument_group("station options")
     station.add_argument("--config", type=Path, help="station TOML (default: the simulated station)")
     station.add_argument("--results", type=positive_int, default=60, metavar="N",
@@ -41,12 +52,20 @@ def add_bench_arguments(parser: argparse.ArgumentParser) -> None:
 def run_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Execute ``wavestack bench``; returns the exit status."""
     if args.target == "station":
-        if args.aperture:
-            raise InputError("--aperture applies to 'bench paper' only, not to 'bench station'")
+        for flag, given in (("--aperture", args.aperture), ("--plots", args.plots), ("--size", args.size != 512)):
+            if given:
+                raise InputError(f"{flag} applies to 'bench paper' only, not to 'bench station'")
         return run_station_bench(args)
     if args.config is not None:
         raise InputError("--config applies to 'bench station' only, not to 'bench paper'")
-    rows = run_paper_benchmark(tuple(args.aperture) if args.aperture else None)
+    if args.size < _SMALLEST_SIZE:
+        raise InputError(f"bench paper: --size {args.size}: expected at least {_SMALLEST_SIZE} samples across")
+    folder = check_plots_folder(args.plots) if args.plots is not None else None
+    cases = run_paper_cases(tuple(args.aperture) if args.aperture else None, args.size, keep_views=folder is not None)
+    rows = [case.row for case in cases]
+    if folder is not None:
+        folder.mkdir(exist_ok=True)
+        write_paper_figures([case.views for case in cases if case.views is not None], folder)
     if args.json:
         print(json_text({"benchmark": "paper", "rows": rows_as_json(rows)}))
     else:

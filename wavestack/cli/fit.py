@@ -13,6 +13,7 @@ from wavestack.cli.command import Command
 from wavestack.cli.example import synthetic_example
 from wavestack.cli.measured_map import FIT_FLAGS, add_fit_method_argument, advised
 from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
+from wavestack.figures import FitView, write_fit_figure
 from wavestack.pipeline import (
     Aperture,
     FitResult,
@@ -84,6 +85,8 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dtype", choices=tuple(_DTYPES), default="float64")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--save-fit", metavar="OUT.npy", help="save the fitted map (NaN outside)")
+    parser.add_argument("--plot", metavar="OUT.png",
+                        help="draw the measured, fitted and residual maps and the coefficients (PNG)")
 
 
 def _load_inputs(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str, np.ndarray | None]:
@@ -105,6 +108,7 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     if args.example and args.mask:
         raise InputError("--mask cannot be combined with --example; expected one of them")
     save_to = check_output_file(args.save_fit, "--save-fit") if args.save_fit else None
+    plot_to = check_output_file(args.plot, "--plot") if args.plot else None
     wavefront, mask, source, truth = _load_inputs(args)
     try:
         fitter = build_fitter(
@@ -133,11 +137,29 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         truth_view = truth if args.remove is None else truth - (wavefront - result.residual_map - fitted)
         truth_error = float(np.sqrt(np.nanmean((fitted - truth_view) ** 2)))
     report = fit_report(source, fitter, result, fit_seconds, truth_error)
+    if plot_to is not None:
+        write_fit_figure(fit_view(source, _map_unit(args), fitter, result), plot_to)
     if args.json:
         print(json_text(report))
     else:
         print(format_report(report))
     return 0
+
+
+def _map_unit(args: argparse.Namespace) -> str:
+    """The unit of the fitted map: waves (the example), nm (an instrument file) or unknown (.npy)."""
+    if args.example:
+        return "waves"
+    return "map units" if str(args.wavefront).lower().endswith(".npy") else "nm"
+
+
+def fit_view(source: str, unit: str, fitter: Fitter, result: FitResult) -> FitView:
+    """What ``--plot`` draws of a fit made with ``residual=True``: the map less removed terms, the fit, the residual."""
+    fitted = fitter.surface(result.coefficients)
+    return FitView(measured=result.residual_map + fitted, fitted=fitted, residual=result.residual_map,
+                   coefficients=result.coefficients, modes=tuple(fitter.basis.modes),
+                   first_index=fitter.basis.first_index, unit=unit, source=source, method=fitter.basis.method,
+                   removed=fitter.removal)
 
 
 def fit_report(

@@ -11,6 +11,8 @@ from wavestack.cli.outputs import json_text
 from wavestack.recording import RecordingReader
 from wavestack.recording.replay import ReplayedResult, SkippedSet, recorded_config, replay
 from wavestack.config import load_station_config
+from wavestack.cli.polish import check_plots_folder
+from wavestack.figures import ReplayCollector, write_replay_figures
 
 
 def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
@@ -19,6 +21,8 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path,
                         help="process with this station file's [processing] instead of the recorded one")
     parser.add_argument("--json", action="store_true", help="one JSON object per line, then a summary")
+    parser.add_argument("--plots", metavar="DIR",
+                        help="draw the coefficients over time, the latency histogram and the last map into DIR")
 
 
 #: Exit status when the recording is damaged: its intact part was replayed, the rest reported.
@@ -29,6 +33,8 @@ def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     """Replay a recording; returns the exit status (2 when it is damaged, after replaying what is intact)."""
     out = sys.stdout
     tally = _Tally()
+    folder = check_plots_folder(args.plots) if args.plots is not None else None
+    collector = ReplayCollector()
     with RecordingReader(args.recording) as reader:
         config = load_station_config(args.config) if args.config else recorded_config(reader, args.recording)
         for item in replay(reader, config, same_settings=args.config is None):
@@ -37,7 +43,12 @@ def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
             else:
                 out.write(_line(item) + "\n")
             tally.add(item)
+            if folder is not None:
+                collector.add(item)
         damage, notes = [str(d) for d in reader.damage], list(reader.notes)
+        if folder is not None:
+            folder.mkdir(exist_ok=True)
+            write_replay_figures(collector.series(str(args.recording), reader.results(), reader.conventions), folder)
     summary = tally.summary() | {"damage": damage, "notes": notes}
     if args.json:
         out.write(json_text(summary) + "\n")

@@ -4,7 +4,8 @@ People judge a surface by looking at it: the figures show each map on the measur
 (the machine frame of the contracts: x right, y up, origin at the grid centre), with a colour bar
 in nm (surfaces) or s/mm^2 (the dwell, as a density over one lattice cell) and a title giving its RMS and PV. The two residuals share one colour
 scale, so what the machine achieved reads directly against what the solver promised.
-matplotlib's Agg backend (no display) through the object API (``Figure``), so nothing global is set.
+matplotlib's Agg backend (no display) through the object API (``Figure``), so nothing global is set;
+the panels are drawn by :func:`wavestack.figures.map_panel`, like every wavestack figure.
 """
 
 from __future__ import annotations
@@ -13,11 +14,12 @@ import math
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from wavestack.figures import SIGNED_CMAP, data_limits, map_panel, new_figure, save_figure
 from wavestack.polish.run_record import RunRecord
 
 __all__ = ["plot_run", "run_plot_name"]
@@ -41,15 +43,10 @@ def _stats(values: NDArray) -> str:
     return f"RMS {np.std(finite):.2f}, PV {np.ptp(finite):.1f}"
 
 
-def _panel(figure: Figure, axes, data: NDArray, extent: tuple[float, float, float, float], title: str, unit: str,
+def _panel(figure: Figure, axes: Axes, data: NDArray, extent: tuple[float, float, float, float], title: str, unit: str,
            limits: tuple[float, float] | None, cmap: str) -> None:
-    shown = np.ma.masked_invalid(np.asarray(data, dtype=np.float64))
-    low, high = limits if limits is not None else (None, None)
-    image = axes.imshow(shown, extent=extent, origin="upper", cmap=cmap, vmin=low, vmax=high, interpolation="nearest")
-    axes.set_title(title, fontsize=9)
-    axes.set_xlabel("x, mm")
-    axes.set_ylabel("y, mm")
-    figure.colorbar(image, ax=axes, label=unit, shrink=0.85)
+    map_panel(figure, axes, data, title=title, unit=unit, limits=limits or data_limits(data), cmap=cmap,
+              extent=extent, axis_labels=("x, mm", "y, mm"))
 
 
 def plot_run(folder: Path, row: RunRecord, *, measured_nm: NDArray, dwell_s: NDArray,
@@ -82,20 +79,19 @@ def plot_run(folder: Path, row: RunRecord, *, measured_nm: NDArray, dwell_s: NDA
     density = ndimage.uniform_filter(np.asarray(dwell_s, dtype=np.float64), size=max(1, step_px), mode="constant")
     floor = 1e-9 * float(density.max(initial=0.0))  # the running-sum filter leaves ~1e-17 where no dwell is
     dwell = np.where(density > floor, density / pixel_mm**2, np.nan)  # s per mm^2 of the part
-    figure = Figure(figsize=(11, 9), layout="constrained")
-    FigureCanvasAgg(figure)
+    figure = new_figure(11, 9)
     grid = figure.subplots(2, 2)
     _panel(figure, grid[0, 0], measured_nm, extent, f"measured surface before (nm): {_stats(measured_nm)}",
-           "surface, nm", None, "RdBu_r")
+           "surface, nm", None, SIGNED_CMAP)
     _panel(figure, grid[0, 1], dwell, extent, f"dwell density (s/mm^2): total {row.total_dwell_s:.0f} s, "
            f"{row.points} points", "dwell, s/mm^2", None, "viridis")
     _panel(figure, grid[1, 0], predicted_residual_nm, extent,
-           f"predicted residual (nm): {_stats(np.asarray(predicted_residual_nm))}", "surface, nm", shared, "RdBu_r")
+           f"predicted residual (nm): {_stats(np.asarray(predicted_residual_nm))}", "surface, nm", shared,
+           SIGNED_CMAP)
     _panel(figure, grid[1, 1], after, extent, f"measured residual (nm): {_stats(after)}", "surface, nm", shared,
-           "RdBu_r")
+           SIGNED_CMAP)
     figure.suptitle(f"run {row.run}, job {row.job_id}: {row.rms_before_nm:.2f} nm RMS before, "
                     f"{row.predicted_rms_nm:.2f} predicted, "
                     + (f"{row.measured_rms_nm:.2f} measured" if math.isfinite(row.measured_rms_nm) else "not measured"))
     path = Path(folder) / run_plot_name(row.run)
-    figure.savefig(path, dpi=80)
-    return path
+    return save_figure(figure, path)

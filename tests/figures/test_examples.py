@@ -1,0 +1,18 @@
+"""The Examples sections of the figure modules run as doctests, and can fail."""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ("wavestack.figures.drawing", "wavestack.figures.fit_figure", "wavestack.figures.paper_stats",
+           "wavestack.figures.replay_figures")
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_examples_run(name: str) -> None:
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS)
+    assert result.attempted > 0, f"{name} has no Examples to run"
+    assert result.failed == 0
