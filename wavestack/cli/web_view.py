@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from contextlib import ExitStack
+from typing import ParamSpec
 
 from wavestack.cli.sim_plc import check_bind
 from wavestack.pipeline import InputError
 from wavestack.web import LiveFeed, WebViewServer
 
-__all__ = ["add_web_arguments", "open_web_view"]
+__all__ = ["add_web_arguments", "chain", "open_web_view"]
+
+P = ParamSpec("P")
 
 
 def _port(text: str) -> int:
@@ -69,3 +73,21 @@ def open_web_view(args: argparse.Namespace, stack: ExitStack, title: str, *, ord
     stack.callback(feed.end, "the command ended")  # runs first (last in): the stopped state goes out
     print(f"web view: {server.url}", file=sys.stderr, flush=True)
     return feed
+
+
+def chain(first: Callable[P, None], second: Callable[P, None] | None) -> Callable[P, None]:
+    """A callback that calls ``first``, then ``second`` when given, with the same arguments.
+
+    Example
+    -------
+    >>> seen = []
+    >>> chain(seen.append, lambda value: seen.append(value * 2))(1); seen
+    [1, 2]
+    """
+    if second is None:
+        return first
+
+    def both(*args: P.args, **kwargs: P.kwargs) -> None:
+        first(*args, **kwargs)
+        second(*args, **kwargs)
+    return both
