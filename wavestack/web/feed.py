@@ -151,6 +151,7 @@ class LiveFeed:
         self._rendered = 0  # number of the map in _image
         self._last_render_s = -math.inf
         self._render_ms_total = 0.0
+        self._renders = 0
 
     # ------------------------------------------------------------------ writers (any thread)
     def __call__(self, record: CycleRecord) -> None:
@@ -222,9 +223,10 @@ class LiveFeed:
                                      max_side=self._max_side)
             self._rendered, self._last_render_s = pending.number, now
             self._render_ms_total += self._image.render_ms
+            self._renders += 1
         state, detail = _state(newest, ended, phase, self._image is not None)
         self._seq += 1
-        renders = self._image.seq if self._image is not None else 0
+        renders = self._renders
         panel = station_panel(snapshot, newest, shown, self._ordering) if snapshot is not None else None
         return LiveUpdate(self._seq, self._title, state, detail, panel, self._image, history, renders=renders,
                           render_ms_mean=self._render_ms_total / renders if renders else math.nan)

@@ -145,7 +145,7 @@ class WebViewServer:
         runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=_FLUSH_S)
         await runner.setup()
         try:
-            site = web.TCPSite(runner, self._host, self._port, shutdown_timeout=_FLUSH_S)
+            site = web.TCPSite(runner, self._host, self._port)
             await site.start()
             self.bound_port = runner.addresses[0][1]
             self._ready.set()
@@ -214,7 +214,7 @@ class WebViewServer:
         origin = request.headers.get("Origin")
         if origin is not None and urlsplit(origin).netloc != request.host:  # another site's page
             raise web.HTTPForbidden(text="the web view serves its own page only")
-        ws = web.WebSocketResponse(heartbeat=10.0)
+        ws = web.WebSocketResponse(heartbeat=10.0, timeout=_FLUSH_S)  # timeout: for the close handshake
         await ws.prepare(request)
         browser = _Browser()
         self._browsers.add(browser)
