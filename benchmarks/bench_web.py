@@ -37,7 +37,8 @@ SMALL = ROOT / "tests" / "configs" / "station-small.toml"
 def _annulus_map() -> np.ndarray:
     y, x = np.mgrid[-1:1:512j, -1:1:512j]
     r2 = x * x + y * y
-    wavefront = 0.35 * np.sqrt(3) * (2 * r2 - 1) + 0.12 * x * y + 0.005 * np.random.default_rng(1).standard_normal(r2.shape)
+    noise = 0.005 * np.random.default_rng(1).standard_normal(r2.shape)
+    wavefront = 0.35 * np.sqrt(3) * (2 * r2 - 1) + 0.12 * x * y + noise
     return np.where((r2 < 0.86) & (r2 > 0.06), wavefront, np.nan)
 
 
@@ -61,7 +62,7 @@ def bench_sink(calls: int = 2000) -> None:
     print(f"LiveFeed sink call: median {statistics.median(times) / 1e3:.1f} us over {calls}")
 
 
-async def _read_ws(url: str, stop: asyncio.Event) -> int:
+async def _read_ws(url: str) -> int:
     count = 0
     async with aiohttp.ClientSession() as session:
         async with session.ws_connect(url.replace("http", "ws") + "ws") as ws:
@@ -82,7 +83,7 @@ def _station_rate(seconds: float, web: bool) -> tuple[float, int]:
         if web:
             while not (found := re.search(r"web view: (\S+)", err.read_text())):
                 time.sleep(0.02)
-            messages = asyncio.run(_read_ws(found.group(1), asyncio.Event()))
+            messages = asyncio.run(_read_ws(found.group(1)))
         process.wait()
         summary = json.loads(out.read_text().splitlines()[-1])
     return summary["results_per_s"], messages
@@ -96,7 +97,8 @@ def bench_station(seconds: float, pairs: int) -> None:
         with_web.append(rate)
         print(f"  pair: {without[-1]:.2f} results/s without, {rate:.2f} with --web ({messages} updates read)")
     ratio = statistics.median(w / o for w, o in zip(with_web, without))
-    print(f"station (small test config, {seconds:g} s runs, {pairs} pairs): median ratio with/without --web {ratio:.3f}")
+    print(f"station (small test config, {seconds:g} s runs, {pairs} pairs): "
+          f"median ratio with/without --web {ratio:.3f}")
 
 
 def main() -> None:

@@ -31,7 +31,8 @@ class Clock:
         return self.now
 
 
-def _result(index: int, coefficients: tuple[float, ...], *, valid: bool = True, reason: str | None = None) -> StationResult:
+def _result(index: int, coefficients: tuple[float, ...], *, valid: bool = True,
+            reason: str | None = None) -> StationResult:
     base = StationResult.invalid(index, reason or "", Counters.zero(5), ordering="noll")
     return replace(base, valid=valid, reason=reason, coefficients=coefficients, residual_rms=0.01 * (index + 1),
                    residual_pv=0.1, fitter="csf-qcm", fitter_diagnostics=FitDiagnostics(3.5, 0, 0.21),

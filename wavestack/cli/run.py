@@ -108,7 +108,7 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         devices = open_station_devices(config, stack)
         station = Station(config, devices)
         stack.callback(station.close)
-        sinks: list[ResultSink] = [] if web is None else [web]
+        sinks: list[ResultSink] = []
         if record_to is not None:
             camera = devices.camera
             dtype = np.uint8 if camera.pixel_format == "Mono8" else np.uint16
@@ -118,6 +118,8 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             sinks.append(recorder)
         view = JsonLines(out) if args.json else TerminalView(out, config.processing.ordering)
         sinks.append(view)
+        if web is not None:  # last: a result is on stdout (and recorded) before the page shows it
+            sinks.append(web)
 
         def on_result(record: CycleRecord) -> None:
             for sink in sinks:
