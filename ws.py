@@ -6,12 +6,15 @@
 
 The first call creates ``.venv`` beside this file and installs wavestack into it (editable, with
 its test extras). Later calls reuse it; it is reinstalled only when ``pyproject.toml`` changes.
+``test`` also needs a browser for the web view's test: Debian's Chromium (``/usr/bin/chromium``),
+installed with ``apt-get`` when missing (as root; Playwright's own browser download is not used).
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import subprocess
 import sys
 import venv
@@ -20,6 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent
 VENV = ROOT / ".venv"
 STAMP = VENV / ".wavestack-installed"
+CHROMIUM = Path("/usr/bin/chromium")
 
 
 def _venv_bin(name: str) -> Path:
@@ -44,12 +48,37 @@ def ensure_environment() -> None:
     STAMP.write_text(_wanted_stamp())
 
 
+def ensure_chromium() -> None:
+    """Install Debian's ``chromium`` package when ``/usr/bin/chromium`` is missing (the browser test needs it).
+
+    Raises
+    ------
+    OSError
+        No apt-get, not root, or the package did not bring ``/usr/bin/chromium``; the message says what to do.
+    """
+    if CHROMIUM.exists():
+        return
+    apt_get = shutil.which("apt-get")
+    if apt_get is None or not hasattr(os, "geteuid") or os.geteuid() != 0:
+        raise OSError(f"{CHROMIUM} is missing and cannot be installed here (needs apt-get as root); the web view's "
+                      "browser test needs it: install Debian's chromium package (apt-get install chromium)")
+    environment = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    for command in ([apt_get, "update"], [apt_get, "install", "-y", "chromium"]):
+        print(f"ws.py: {CHROMIUM} is missing (the web view's browser test needs it): {' '.join(command)}",
+              file=sys.stderr, flush=True)
+        subprocess.run(command, check=True, env=environment)
+    if not CHROMIUM.exists():
+        raise OSError(f"apt-get installed chromium but {CHROMIUM} is still missing")
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0] in {"-h", "--help"}:
         print(__doc__.strip())
         return 0 if argv else 2
     try:
         ensure_environment()
+        if argv[0] == "test":
+            ensure_chromium()
     except (subprocess.CalledProcessError, OSError) as error:
         print(f"ws.py: set-up failed: {error}", file=sys.stderr)
         return 1

@@ -17,11 +17,12 @@ from __future__ import annotations
 import argparse
 import sys
 import threading
+from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 from typing import TextIO
 
-from wavestack.align.loop import AlignmentLoop, AlignSummary, IterationRecord
+from wavestack.align.loop import AlignmentLoop, AlignSummary, FieldMeasurement, IterationRecord
 from wavestack.align.recorder import AlignRecorder
 from wavestack.align.sensitivity import DOFS
 from wavestack.align.session import open_session, options_of
@@ -30,8 +31,10 @@ from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.outputs import json_text
 from wavestack.cli.signals import stop_on_signals
+from wavestack.cli.web_view import add_web_arguments, chain, open_web_view
 from wavestack.config.align import load_align_config
 from wavestack.recording import check_recording_path
+from wavestack.web import LiveFeed
 
 EXIT_FAULT = 3
 EXIT_INTERRUPTED = 130
@@ -55,6 +58,7 @@ def add_align_arguments(parser: argparse.ArgumentParser) -> None:
                         help="stop once every field point's RMS is at most X waves (default: config, lambda/14)")
     parser.add_argument("--json", action="store_true", help="one JSON object per iteration, then a summary")
     parser.add_argument("--record", metavar="FILE.h5", help="record every iteration (HDF5)")
+    add_web_arguments(parser)
 
 
 class _Printer:
@@ -86,6 +90,15 @@ class _Printer:
         self._stream.flush()
 
 
+def _shown_on(feed: LiveFeed, measure: Callable[[int], FieldMeasurement]) -> Callable[[int], FieldMeasurement]:
+    """The loop's measurement, each map also shown on the web view."""
+    def measured(index: int) -> FieldMeasurement:
+        measurement = measure(index)
+        feed.show_map(measurement.waves, units="waves", title=f"wavefront at field point {index}")
+        return measurement
+    return measured
+
+
 def run_align(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Run one alignment; returns the exit status (module notes)."""
     record_to = check_recording_path(args.record) if args.record else None
@@ -94,6 +107,7 @@ def run_align(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     printer = _Printer(sys.stdout, args.json)
     stop = threading.Event()
     with ExitStack() as stack, stop_on_signals(stop):
+        web = open_web_view(args, stack, "wavestack align")
         session = open_session(config, stack)
         recorder = None
         if record_to is not None:
@@ -105,8 +119,15 @@ def run_align(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             if recorder is not None:
                 recorder.iteration(record)
 
-        summary = AlignmentLoop(**session.loop_arguments(), options=options, stop=stop,  # type: ignore[arg-type]
-                                on_iteration=on_iteration).run()
+        arguments = session.loop_arguments()
+        if web is not None:
+            arguments["measure"] = _shown_on(web, session.measure)
+        summary = AlignmentLoop(**arguments, options=options, stop=stop,  # type: ignore[arg-type]
+                                on_iteration=chain(on_iteration, web.add_iteration if web else None),
+                                on_event=web.loop_phase if web else None).run()
+        if web is not None:
+            web.end(f"{summary.state.phase.value} after {summary.state.iterations_done} correction(s): "
+                    f"{summary.state.reason}")
         if recorder is not None:
             recorder.finish(summary)
     printer.summary(summary)

@@ -28,6 +28,7 @@ from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.outputs import json_text
 from wavestack.cli.signals import stop_on_signals
+from wavestack.cli.web_view import add_web_arguments, chain, open_web_view
 from wavestack.config.polishing import load_polishing_config
 from wavestack.pipeline import InputError
 from wavestack.polish.loop import CampaignSummary, LoopOptions, PolishingLoop
@@ -63,6 +64,7 @@ def add_polish_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="one JSON object per run, then a summary")
     parser.add_argument("--record", metavar="FILE.h5", help="record every measurement, job and run (HDF5)")
     parser.add_argument("--plots", metavar="DIR", help="one PNG per run (created if absent)")
+    add_web_arguments(parser)
 
 
 def check_plots_folder(text: str) -> Path:
@@ -119,7 +121,8 @@ def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     printer = _Printer(sys.stdout, args.json)
     stop = threading.Event()
     with ExitStack() as stack, stop_on_signals(stop):
-        session = open_session(config, stack)
+        web = open_web_view(args, stack, "wavestack polish", ordering=config.station.processing.ordering)
+        session = open_session(config, stack, sinks=() if web is None else (web,))
         if plots is not None:
             plots.mkdir(exist_ok=True)
         recorder = None
@@ -134,8 +137,11 @@ def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
             stack.callback(recorder.close, "faulted", "the command ended by an error", -1)
         loop = PolishingLoop(config, options, link=session.link, maps=session.maps, tif=session.tif,
                              job_folder=session.job_folder, stop=stop, recorder=recorder, plots=plots,
-                             target_nm=session.target_nm, on_run=printer.run, on_event=printer.event)
+                             target_nm=session.target_nm, on_run=chain(printer.run, web.add_run if web else None),
+                             on_event=chain(printer.event, web.loop_phase if web else None))
         summary = loop.run()
+        if web is not None:
+            web.end(f"{summary.state.phase.value} after {summary.state.runs_done} run(s): {summary.state.reason}")
         if recorder is not None:
             recorder.close(summary.state.phase.value, summary.state.reason or "", summary.state.runs_done)
     printer.summary(summary)

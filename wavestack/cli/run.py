@@ -21,6 +21,7 @@ from wavestack.cli.arguments import positive_float, positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.outputs import json_text
 from wavestack.cli.signals import stop_on_signals
+from wavestack.cli.web_view import add_web_arguments, open_web_view
 from wavestack.config import load_station_config
 from wavestack.recording import StationRecorder, check_recording_path, open_recording
 from wavestack.station import (
@@ -43,6 +44,7 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true",
                         help="one JSON object per line (results, then a summary) instead of the live view")
     parser.add_argument("--record", metavar="FILE.h5", help="record frames, apertures and results (HDF5)")
+    add_web_arguments(parser)
 
 
 class TerminalView:
@@ -102,6 +104,7 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     stop = threading.Event()
     out = sys.stdout
     with ExitStack() as stack, stop_on_signals(stop):
+        web = open_web_view(args, stack, "wavestack run", ordering=config.processing.ordering)
         devices = open_station_devices(config, stack)
         station = Station(config, devices)
         stack.callback(station.close)
@@ -115,12 +118,16 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             sinks.append(recorder)
         view = JsonLines(out) if args.json else TerminalView(out, config.processing.ordering)
         sinks.append(view)
+        if web is not None:  # last: a result is on stdout (and recorded) before the page shows it
+            sinks.append(web)
 
         def on_result(record: CycleRecord) -> None:
             for sink in sinks:
                 sink(record)
 
         summary = station.run(stop=stop, on_result=on_result, max_results=args.frames, duration_s=args.duration)
+        if web is not None:
+            web.end(f"stopped after {summary.results} results ({summary.valid} valid)")
     if args.json:
         out.write(json_text(summary.to_json()) + "\n")
     else:

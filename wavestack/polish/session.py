@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import tempfile
 import threading
+from collections.abc import Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +28,7 @@ from wavestack.pipeline import InputError
 from wavestack.pipeline.polishing import ToolInfluence
 from wavestack.polish.live_maps import LiveMaps
 from wavestack.polish.planning import host_tif
-from wavestack.station import Station, StationDevices, open_station_devices
+from wavestack.station import CycleRecord, ResultSink, Station, StationDevices, open_station_devices
 
 logger = logging.getLogger(__name__)
 
@@ -112,14 +113,22 @@ def _job_folder(config: PolishingConfig, stack: ExitStack) -> Path:
     return Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="wavestack-jobs-")))
 
 
-def _serve(stack: ExitStack, station: Station, maps: LiveMaps) -> None:
-    """The station on its own thread until the stack closes (its heartbeat keeps the PLC's watchdog fed)."""
+def _serve(stack: ExitStack, station: Station, maps: LiveMaps, sinks: Sequence[ResultSink] = ()) -> None:
+    """The station on its own thread until the stack closes (its heartbeat keeps the PLC's watchdog fed).
+
+    ``sinks`` get every record after ``maps`` (the web view).
+    """
     halt = threading.Event()
+
+    def on_result(record: CycleRecord) -> None:
+        maps(record)
+        for sink in sinks:
+            sink(record)
 
     def serve() -> None:
         why = "stopped"
         try:
-            station.run(stop=halt, on_result=maps)
+            station.run(stop=halt, on_result=on_result if sinks else maps)
         except Exception as error:  # the loop sees it as an untrusted measurement or a lost machine
             logger.error("the station stopped: %s", error, exc_info=True)
             why = f"{type(error).__name__}: {error}"
@@ -136,8 +145,10 @@ def _serve(stack: ExitStack, station: Station, maps: LiveMaps) -> None:
     stack.callback(stop_serving)
 
 
-def open_session(config: PolishingConfig, stack: ExitStack) -> PolishingSession:
+def open_session(config: PolishingConfig, stack: ExitStack, *, sinks: Sequence[ResultSink] = ()) -> PolishingSession:
     """Open everything a campaign needs (module notes); ``stack`` closes it all.
+
+    ``sinks`` also get the station's records (the web view).
 
     Raises
     ------
@@ -156,5 +167,5 @@ def open_session(config: PolishingConfig, stack: ExitStack) -> PolishingSession:
     station = Station(config.station, devices)
     stack.callback(station.close)
     maps = LiveMaps()
-    _serve(stack, station, maps)
+    _serve(stack, station, maps, sinks)
     return PolishingSession(config, devices, devices.link, station, maps, job_folder, tif, target)
