@@ -1,5 +1,7 @@
 """An in-memory alignment bench for many seeded trials: the loop's real code, platforms without sockets.
 
+:func:`run_trial` runs the loop on the model's maps; :func:`camera_trial` runs the default session
+(the GCS simulators, the station's camera and the CSF-QCM fitter) and records the moves sent.
 The platforms keep the driver's contract the loop uses (position, move_absolute refusing a step
 or a target outside the limits, wait_on_target, stop_all, limits) and record every move, so the
 trials also check that no move the loop sends breaks the limits. The end-to-end path (the GCS
@@ -10,11 +12,13 @@ from __future__ import annotations
 
 import threading
 import time
+from contextlib import ExitStack
 
 import numpy as np
 
 from wavestack.align import TermFitter
 from wavestack.align.loop import AlignmentLoop, AlignOptions, AlignSummary, FieldMeasurement
+from wavestack.align.session import open_session, options_of
 from wavestack.drivers.pi_gcs import HexapodLimits, move_refusals
 from wavestack.simulators.align_bench import draw_mount
 from wavestack.simulators.tma import HexapodPose, TmaModel
@@ -76,3 +80,34 @@ def run_trial(design, as_built, seed: int, options: AlignOptions, *, noise_waves
                          measure=measure, options=options, stop=threading.Event())
     summary: AlignSummary = loop.run()
     return summary, hexapod, mount
+
+
+class RecordingHexapod:
+    """A driver whose moves are recorded as ``(position before, target sent)``; everything else delegated."""
+
+    def __init__(self, driver) -> None:  # noqa: ANN001
+        self._driver = driver
+        self.moves: list[tuple[dict[str, float], dict[str, float]]] = []
+
+    def __getattr__(self, name: str):  # noqa: ANN204
+        return getattr(self._driver, name)
+
+    def move_absolute(self, target):  # noqa: ANN001, ANN201 - the driver's signature
+        before = self._driver.position()
+        sent = self._driver.move_absolute(target)
+        self.moves.append((before, dict(sent.target)))
+        return sent
+
+
+def camera_trial(config, seed: int, *, on_event=None):  # noqa: ANN001, ANN201
+    """One seeded trial of ``config``'s session (mount drawn from ``[align.simulator]``'s ranges with
+    ``seed``, as-built seed ``1000 + seed``): (summary, moves sent, the hexapod's limits)."""
+    sim = config.align.simulator
+    mount = draw_mount(sim.decentre_mm, sim.despace_mm, sim.tilt_deg, seed)
+    with ExitStack() as stack:
+        session = open_session(config, stack, mount=mount, as_built_seed=1000 + seed)
+        hexapod = RecordingHexapod(session.hexapod)
+        arguments = {**session.loop_arguments(), "hexapod": hexapod}
+        summary = AlignmentLoop(**arguments, options=options_of(config), stop=threading.Event(),  # type: ignore[arg-type]
+                                on_event=on_event).run()
+        return summary, hexapod.moves, session.hexapod.limits
