@@ -60,8 +60,9 @@ class MemoryPlatform:
 
 
 def run_trial(design, as_built, seed: int, options: AlignOptions, *, noise_waves: float = 0.02,
-              decentre_mm: float = 0.3, despace_mm: float = 0.3, tilt_deg: float = 0.03):
-    """One seeded trial: (summary, hexapod platform)."""
+              decentre_mm: float = 0.3, despace_mm: float = 0.3, tilt_deg: float = 0.03,
+              fitter: TermFitter | None = None):
+    """One seeded trial: (summary, hexapod platform, mount); ``fitter`` default: CSF-QCM on the pupil."""
     mount = draw_mount(decentre_mm, despace_mm, tilt_deg, seed)
     truth = TmaModel(design, as_built, seed=1000 + seed, mount=mount)
     model = TmaModel(design)
@@ -76,7 +77,7 @@ def run_trial(design, as_built, seed: int, options: AlignOptions, *, noise_waves
 
     loop = AlignmentLoop(design_model=model.wavefront, fields=fields,
                          field_positions=[{"1": 10 * fx, "2": 10 * fy} for fx, fy in fields],
-                         fitter=TermFitter(model.pupil_mask, 22), hexapod=hexapod, field_stage=stage,  # type: ignore[arg-type]
+                         fitter=fitter or TermFitter(model.pupil_mask, 22), hexapod=hexapod, field_stage=stage,  # type: ignore[arg-type]
                          measure=measure, options=options, stop=threading.Event())
     summary: AlignSummary = loop.run()
     return summary, hexapod, mount
