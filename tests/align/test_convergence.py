@@ -74,7 +74,9 @@ def _assert_within_limits(moves, limits) -> None:  # noqa: ANN001
             assert abs(value - start[axis]) <= limits.max_step[axis] + 1e-9
 
 
+@pytest.mark.slow
 def test_three_seeded_trials_converge() -> None:
+    """Model level: the loop's own convergence without the camera (the default path is the slow test below)."""
     for seed, phase, iterations, rms in _trials(3):
         assert phase == "target-met" and iterations <= 5 and rms <= TARGET, (seed, phase, iterations, rms)
 
