@@ -109,6 +109,7 @@ def camera_trial(config, seed: int, *, on_event=None):  # noqa: ANN001, ANN201
         session = open_session(config, stack, mount=mount, as_built_seed=1000 + seed)
         hexapod = RecordingHexapod(session.hexapod)
         arguments = {**session.loop_arguments(), "hexapod": hexapod}
-        summary = AlignmentLoop(**arguments, options=options_of(config), stop=threading.Event(),  # type: ignore[arg-type]
-                                on_event=on_event).run()
+        loop = AlignmentLoop(**arguments, options=options_of(config),  # type: ignore[arg-type]
+                             stop=threading.Event(), on_event=on_event)
+        summary = loop.run()
         return summary, hexapod.moves, session.hexapod.limits
