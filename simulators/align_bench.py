@@ -8,8 +8,9 @@ renders what the interferometer sees *now*: the field point the field stage's po
 simulator holds, both read at render time, plus seeded white noise per pixel. The camera fault
 switch (:meth:`AlignmentBench.lose_camera`) makes the next renders fail as a lost camera does.
 
-This is the model-level bench (wavefront maps, no fringes): the station's interferogram path is
-not wired to the TMA yet (docs/alignment.md says what is left).
+:class:`SurfaceCoupling` puts the wavefront on a station test optic's surface, so that the
+station's simulated camera records its fringes, with the reference's tilt set as an operator
+sets it (the return spot centred, :func:`centring_tilt`).
 """
 
 from __future__ import annotations
@@ -24,7 +25,10 @@ from numpy.typing import NDArray
 from wavestack.simulators.pi_gcs import HexapodSimSettings, HexapodSimulator
 from wavestack.simulators.tma import AsBuiltErrors, HexapodPose, TmaDesign, TmaModel
 
-__all__ = ["AlignmentBench", "CameraLost", "draw_mount"]
+__all__ = ["AlignmentBench", "CameraLost", "ReferenceTilt", "SurfaceCoupling", "centring_tilt", "draw_mount"]
+
+#: The reference mount's tilt step, waves per camera pixel (a fringe every 1000 pixels).
+TILT_RESOLUTION = 1e-3
 
 
 class CameraLost(ConnectionError):
@@ -142,15 +146,69 @@ class AlignmentBench:
         return BenchFrame(waves, field, pose, exposure)
 
 
+@dataclass(frozen=True)
+class ReferenceTilt:
+    """The tip/tilt the interferometer's reference was set to for one refresh, waves per camera pixel.
+
+    ``x_per_px`` along +col (x right), ``y_per_px`` along -row (y up).
+
+    Example
+    -------
+    >>> ReferenceTilt(0.5, 0.0).plane((2, 3)).tolist()
+    [[-0.5, 0.0, 0.5], [-0.5, 0.0, 0.5]]
+    """
+
+    x_per_px: float = 0.0
+    y_per_px: float = 0.0
+
+    def plane(self, shape: tuple[int, int]) -> NDArray[np.float64]:
+        """The tilt as a map about the grid's centre, waves, shape ``shape``."""
+        rows, cols = np.mgrid[: shape[0], : shape[1]]
+        return self.x_per_px * (cols - (shape[1] - 1) / 2) + self.y_per_px * ((shape[0] - 1) / 2 - rows)
+
+
+def centring_tilt(waves: NDArray[np.floating], resolution: float = TILT_RESOLUTION) -> ReferenceTilt:
+    """The reference tilt that centres the return spot: the map's least-squares plane, rounded.
+
+    The spot's centroid is the mean wavefront slope; the least-squares plane over the pupil is
+    the same to the precision a centring needs. Rounded to ``resolution`` waves per pixel (the
+    reference mount's step): the loop adds back the tilt *set*, not the wavefront's own.
+
+    Example
+    -------
+    >>> t = centring_tilt(ReferenceTilt(0.3, -0.2).plane((8, 16)) + 5.0)
+    >>> round(t.x_per_px, 6), round(t.y_per_px, 6)
+    (0.3, -0.2)
+    """
+    values = np.asarray(waves, dtype=np.float64)
+    rows, cols = np.nonzero(np.isfinite(values))
+    if rows.size < 3:
+        return ReferenceTilt()
+    x = cols - (values.shape[1] - 1) / 2
+    y = (values.shape[0] - 1) / 2 - rows
+    design = np.column_stack([np.ones(rows.size), x, y])
+    (_, sx, sy), *_ = np.linalg.lstsq(design, values[rows, cols], rcond=None)
+    return ReferenceTilt(float(np.round(sx / resolution) * resolution), float(np.round(sy / resolution) * resolution))
+
+
 class SurfaceCoupling:
     """Puts the bench's wavefront on a station test optic's surface, so the station's camera sees it.
 
     The station's simulated interferometer renders its :class:`~wavestack.simulators.optic.TestOptic`
     (zero Zernike figure) plus the optic's surface, ``W = reflection_factor * heights /
-    wavelength_nm``; :meth:`refresh` sets the heights to ``wavefront * wavelength_nm /
-    reflection_factor`` (zero outside the pupil) through the surface's own
+    wavelength_nm``; :meth:`refresh` sets the heights to ``(wavefront - reference tilt) *
+    wavelength_nm / reflection_factor`` (zero outside the pupil) through the surface's own
     ``apply_removal`` (one revision per refresh), so the frames rendered after it show the
     field point and hexapod pose of that moment. The optic's grid must be the TMA's camera grid.
+
+    The reference tilt (``null_tilt``) is what an interferometer operator does at each field
+    point before measuring: tip/tilt the reference (or follow the image laterally) until the
+    return spot is centred in the alignment view, i.e. null the fringes' tilt
+    (:func:`centring_tilt`). A misaligned secondary moves the image by far more than it
+    aberrates it: over +-0.3 mm / +-0.03 deg the tilt alone reaches 0.9 waves per pixel on the
+    1 mm pixels of the 256 x 128 grid (aliased beyond 0.5), the rest of the map under 0.1
+    (docs/alignment.md). The tilt set is returned so that the measurement adds it back: the
+    loop sees the whole wavefront, image motion included.
 
     Parameters
     ----------
@@ -159,19 +217,26 @@ class SurfaceCoupling:
         The station optic's surface (``devices.bench.optic.surface``).
     wavelength_nm, reflection_factor : float
         As the optic's ``[optic.surface]`` converts heights to waves.
+    null_tilt : bool
+        Centre the return spot before each measurement (default) or leave the tilt on the fringes.
     """
 
     def __init__(self, bench: AlignmentBench, surface, wavelength_nm: float,  # noqa: ANN001
-                 reflection_factor: float) -> None:
+                 reflection_factor: float, *, null_tilt: bool = True) -> None:
         if surface is None or tuple(surface.shape) != tuple(bench.truth.design.camera_shape):
             raise ValueError(f"surface: expected the station optic's surface on the TMA grid "
                              f"{bench.truth.design.camera_shape}, got {None if surface is None else surface.shape}")
-        self._bench, self._surface = bench, surface
+        self._bench, self._surface, self._null_tilt = bench, surface, bool(null_tilt)
         self._nm_per_wave = float(wavelength_nm) / float(reflection_factor)
 
-    def refresh(self) -> BenchFrame:
-        """Render the wavefront now and put it on the surface; returns the frame (its time is the refresh's)."""
+    def refresh(self) -> tuple[BenchFrame, ReferenceTilt]:
+        """Render the wavefront now, set the reference tilt, put the rest on the surface.
+
+        Returns the frame (its time is the refresh's) and the reference tilt set (zero without
+        ``null_tilt``).
+        """
         frame = self._bench.wavefront()
-        target = np.nan_to_num(frame.waves, nan=0.0) * self._nm_per_wave
+        tilt = centring_tilt(frame.waves) if self._null_tilt else ReferenceTilt()
+        target = np.nan_to_num(frame.waves - tilt.plane(frame.waves.shape), nan=0.0) * self._nm_per_wave
         self._surface.apply_removal(self._surface.heights_nm() - target)
-        return frame
+        return frame, tilt

@@ -1,5 +1,7 @@
 """An in-memory alignment bench for many seeded trials: the loop's real code, platforms without sockets.
 
+:func:`run_trial` runs the loop on the model's maps; :func:`camera_trial` runs the default session
+(the GCS simulators, the station's camera and the CSF-QCM fitter) and records the moves sent.
 The platforms keep the driver's contract the loop uses (position, move_absolute refusing a step
 or a target outside the limits, wait_on_target, stop_all, limits) and record every move, so the
 trials also check that no move the loop sends breaks the limits. The end-to-end path (the GCS
@@ -10,11 +12,13 @@ from __future__ import annotations
 
 import threading
 import time
+from contextlib import ExitStack
 
 import numpy as np
 
 from wavestack.align import TermFitter
 from wavestack.align.loop import AlignmentLoop, AlignOptions, AlignSummary, FieldMeasurement
+from wavestack.align.session import open_session, options_of
 from wavestack.drivers.pi_gcs import HexapodLimits, move_refusals
 from wavestack.simulators.align_bench import draw_mount
 from wavestack.simulators.tma import HexapodPose, TmaModel
@@ -56,8 +60,9 @@ class MemoryPlatform:
 
 
 def run_trial(design, as_built, seed: int, options: AlignOptions, *, noise_waves: float = 0.02,
-              decentre_mm: float = 0.3, despace_mm: float = 0.3, tilt_deg: float = 0.03):
-    """One seeded trial: (summary, hexapod platform)."""
+              decentre_mm: float = 0.3, despace_mm: float = 0.3, tilt_deg: float = 0.03,
+              fitter: TermFitter | None = None):
+    """One seeded trial: (summary, hexapod platform, mount); ``fitter`` default: CSF-QCM on the pupil."""
     mount = draw_mount(decentre_mm, despace_mm, tilt_deg, seed)
     truth = TmaModel(design, as_built, seed=1000 + seed, mount=mount)
     model = TmaModel(design)
@@ -72,7 +77,39 @@ def run_trial(design, as_built, seed: int, options: AlignOptions, *, noise_waves
 
     loop = AlignmentLoop(design_model=model.wavefront, fields=fields,
                          field_positions=[{"1": 10 * fx, "2": 10 * fy} for fx, fy in fields],
-                         fitter=TermFitter(model.pupil_mask, 22), hexapod=hexapod, field_stage=stage,  # type: ignore[arg-type]
+                         fitter=fitter or TermFitter(model.pupil_mask, 22), hexapod=hexapod, field_stage=stage,  # type: ignore[arg-type]
                          measure=measure, options=options, stop=threading.Event())
     summary: AlignSummary = loop.run()
     return summary, hexapod, mount
+
+
+class RecordingHexapod:
+    """A driver whose moves are recorded as ``(position before, target sent)``; everything else delegated."""
+
+    def __init__(self, driver) -> None:  # noqa: ANN001
+        self._driver = driver
+        self.moves: list[tuple[dict[str, float], dict[str, float]]] = []
+
+    def __getattr__(self, name: str):  # noqa: ANN204
+        return getattr(self._driver, name)
+
+    def move_absolute(self, target):  # noqa: ANN001, ANN201 - the driver's signature
+        before = self._driver.position()
+        sent = self._driver.move_absolute(target)
+        self.moves.append((before, dict(sent.target)))
+        return sent
+
+
+def camera_trial(config, seed: int, *, on_event=None):  # noqa: ANN001, ANN201
+    """One seeded trial of ``config``'s session (mount drawn from ``[align.simulator]``'s ranges with
+    ``seed``, as-built seed ``1000 + seed``): (summary, moves sent, the hexapod's limits)."""
+    sim = config.align.simulator
+    mount = draw_mount(sim.decentre_mm, sim.despace_mm, sim.tilt_deg, seed)
+    with ExitStack() as stack:
+        session = open_session(config, stack, mount=mount, as_built_seed=1000 + seed)
+        hexapod = RecordingHexapod(session.hexapod)
+        arguments = {**session.loop_arguments(), "hexapod": hexapod}
+        loop = AlignmentLoop(**arguments, options=options_of(config),  # type: ignore[arg-type]
+                             stop=threading.Event(), on_event=on_event)
+        summary = loop.run()
+        return summary, hexapod.moves, session.hexapod.limits

@@ -25,6 +25,7 @@ def test_the_shipped_bench_loads() -> None:
     ("align", "gain", 1.5, "gain"),
     ("align", "steps", [0.01, 0.01], "steps: expected 5 values"),
     ("align", "max_iterations", 0, "max_iterations"),
+    ("align", "fit_method", "zernike", "fit_method"),
     ("field_stage", "axes", ["1", "2", "3"], "[field_stage] axes"),
     ("hexapod", "axes", ["X", "Y", "Z"], "[hexapod] axes"),
 ])

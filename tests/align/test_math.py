@@ -16,13 +16,26 @@ SOFT = {"X": (-5.0, 5.0), "Y": (-5.0, 5.0), "Z": (-2.0, 2.0), "U": (-0.5, 0.5), 
 STEP = {"X": 0.5, "Y": 0.5, "Z": 0.5, "U": 0.05, "V": 0.05}
 
 
-def test_fitter_recovers_terms_on_the_pupil() -> None:
+@pytest.mark.parametrize("method", ["csf-qcm", "circle"])
+def test_fitter_recovers_terms_on_the_pupil(method: str) -> None:
     design, _ = example()
-    fitter = TermFitter(TmaModel(design).pupil_mask, 15)
+    fitter = TermFitter(TmaModel(design).pupil_mask, 15, method=method)
     truth = np.random.default_rng(3).normal(0.0, 0.2, fitter.count)
     assert np.allclose(fitter.terms(fitter.synthesise(truth)), truth, atol=1e-9)
     with pytest.raises(ValueError, match="non-finite"):
         fitter.terms(np.full(fitter.mask.shape, np.nan))
+
+
+def test_the_default_fitter_is_csf_qcm_and_differs_from_the_circle() -> None:
+    """The CSF-QCM basis is not the circle's: the same map gives other terms (one basis per loop)."""
+    design, _ = example()
+    mask = TmaModel(design).pupil_mask
+    csf, circle = TermFitter(mask, 11), TermFitter(mask, 11, method="circle")
+    assert csf.method == "csf-qcm"
+    w = circle.synthesise(np.eye(10)[2])  # circle defocus
+    assert np.linalg.norm(csf.terms(w) - circle.terms(w)) > 0.05
+    with pytest.raises(ValueError, match="method"):
+        TermFitter(mask, 11, method="zernike")
 
 
 def test_sensitivity_predicts_a_small_misalignment() -> None:

@@ -2,7 +2,8 @@
 
 One job per module: the terms of a map on the fixed aperture (:mod:`.terms`), the sensitivity
 matrix of the design model (:mod:`.sensitivity`), the truncated-SVD estimate (:mod:`.estimator`),
-the correction within the hexapod's step and limits (:mod:`.correction`), the loop's life as data
+the correction within the hexapod's step and limits (:mod:`.correction`), whether the camera
+resolves the fringes over the misalignment range (:mod:`.fringes`), the loop's life as data
 (:mod:`.state`), and the loop that drives the field stage, the measurement and the hexapod
 through them (:mod:`.loop`).
 """
@@ -21,8 +22,8 @@ from wavestack.align.state import (
     advance,
     judge_iteration,
 )
-from wavestack.align.terms import TermFitter
+from wavestack.align.terms import FIT_METHODS, TermFitter
 
-__all__ = ["AlignEvent", "AlignPhase", "AlignState", "DOFS", "Estimate", "PlannedMove", "Sensitivity",
+__all__ = ["FIT_METHODS", "AlignEvent", "AlignPhase", "AlignState", "DOFS", "Estimate", "PlannedMove", "Sensitivity",
            "TERMINAL_PHASES", "TRANSITIONS", "TermFitter", "advance", "build_sensitivity", "estimate_state",
            "judge_iteration", "model_terms", "plan_move"]

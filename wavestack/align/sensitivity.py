@@ -85,7 +85,7 @@ def build_sensitivity(model: WavefrontModel, fields: Sequence[tuple[float, float
     fields : sequence of (float, float)
         Field points, deg.
     fitter : TermFitter
-        The measurement's fitter (same aperture, same basis).
+        The measurement's fitter (same method on the same aperture: one basis).
     at, steps, scales : array (5,)
         State to linearise about, finite-difference half steps, column normalisation
         (X Y Z mm, U V deg); steps and scales > 0.
@@ -96,8 +96,8 @@ def build_sensitivity(model: WavefrontModel, fields: Sequence[tuple[float, float
 
     Examples
     --------
-    >>> mask = np.ones((8, 24), bool)
-    >>> fitter = TermFitter(mask, 6)
+    >>> mask = np.ones((16, 48), bool)
+    >>> fitter = TermFitter(mask, 6, method="circle")
     >>> flat = lambda field, pose: fitter.synthesise([pose.x, pose.y, pose.z, 0, 0])
     >>> s = build_sensitivity(flat, [(0.0, 0.0)], fitter, at=np.zeros(5), steps=np.full(5, 1e-3),
     ...                       scales=np.full(5, 0.1))

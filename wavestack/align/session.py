@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from wavestack.align.fringes import MAX_SLOPE_WAVES_PER_PX, fringe_slope_bound
 from wavestack.align.loop import AlignOptions, FieldMeasurement
 from wavestack.align.station_source import StationSource, fixed_aperture
 from wavestack.align.terms import TermFitter
@@ -30,7 +31,7 @@ from wavestack.simulators.tma import HexapodPose, TmaModel
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["AlignSession", "open_session", "options_of"]
+__all__ = ["AlignSession", "check_fringes", "open_session", "options_of"]
 
 
 @dataclass(eq=False)
@@ -68,6 +69,32 @@ def options_of(config: AlignConfig, *, max_iterations: int | None = None,
     return AlignOptions(a.target_rms_waves if target_rms_waves is None else target_rms_waves,
                         max_iterations or a.max_iterations, a.gain, a.rcond, a.min_improvement, a.steps, a.scales,
                         a.readback_tolerance, config.hexapod.move_timeout_s)
+
+
+def check_fringes(config: AlignConfig, design: TmaModel) -> float:
+    """Refuse a camera grid on which the stated misalignment range would alias (:mod:`.fringes`).
+
+    The range is ``[align.simulator]``'s (the draw of the mount error); returns the bound, waves
+    per pixel.
+
+    Raises
+    ------
+    InputError
+        The bound exceeds :data:`~.fringes.MAX_SLOPE_WAVES_PER_PX`; the message gives the pixel size
+        that would do.
+    """
+    sim = config.align.simulator
+    ranges = np.array([sim.decentre_mm, sim.decentre_mm, sim.despace_mm, sim.tilt_deg, sim.tilt_deg])
+    bound = fringe_slope_bound(design.wavefront, config.design.field_points_deg, ranges,
+                               null_tilt=config.align.null_tilt)
+    if bound > MAX_SLOPE_WAVES_PER_PX:
+        pixel = config.design.pixel_mm * MAX_SLOPE_WAVES_PER_PX / bound
+        raise InputError(f"{config.source}: [tma] camera_shape/pixel_mm: over the misalignment range of "
+                         f"[align.simulator] the fringes reach {bound:.2f} waves per pixel (null_tilt = "
+                         f"{str(config.align.null_tilt).lower()}), above {MAX_SLOPE_WAVES_PER_PX:g}; expected "
+                         f"pixels of at most {pixel:.3g} mm, a smaller range, or null_tilt = true")
+    logger.info("align: fringe slope bound %.3f waves per pixel over the stated range", bound)
+    return bound
 
 
 def _driver(settings, port: int, stack: ExitStack) -> PIHexapod:  # type: ignore[no-untyped-def]
@@ -110,12 +137,15 @@ def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | 
     design = TmaModel(config.design)
     station_path = config.station_path()
     station = None
+    method = config.align.fit_method
     if station_path is None:
-        fitter = TermFitter(design.pupil_mask, config.align.max_noll)
+        fitter = TermFitter(design.pupil_mask, config.align.max_noll, method=method)
     else:  # the station's detected aperture loses rim pixels: both fits on the pupil less edge_px
+        check_fringes(config, design)
         mask = fixed_aperture(design.pupil_mask, config.align.edge_px)
-        fitter = TermFitter(mask, config.align.max_noll)
-        station = StationSource(station_path, bench, mask, stack, averaged=config.align.averaged)
+        fitter = TermFitter(mask, config.align.max_noll, method=method)
+        station = StationSource(station_path, bench, mask, stack, averaged=config.align.averaged,
+                                null_tilt=config.align.null_tilt)
     scale = config.align.field_stage_mm_per_deg
     positions = [dict(zip(config.field_stage.axes, (fx * scale, fy * scale)))
                  for fx, fy in config.design.field_points_deg]

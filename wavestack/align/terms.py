@@ -1,14 +1,17 @@
 """The Zernike terms of a wavefront on a fixed aperture: one fitter for the model and the measurement.
 
 The sensitivity matrix and the measurement must live in one basis, so both go through one
-:class:`TermFitter`, built once on the aperture the measurement uses. The basis is Noll's
-RMS-normalised Zernike polynomials (:func:`wavestack.pipeline.zernike.zernike_basis`) on the unit
-circle through the pupil's corners (radius half the diagonal of the camera-grid bounding box of
-the mask), least-squares fitted by a pseudo-inverse computed once. Piston (Noll 1) is fitted and
-dropped: the interferometer has no absolute phase. On the long rounded rectangle the circular
-Zernikes are not orthogonal, which a least-squares fit tolerates as long as the Gram matrix is
-well conditioned (checked at construction; the CSF-QCM fit of the station is not used here yet:
-see docs/alignment.md).
+:class:`TermFitter`, built once on the aperture the measurement uses, with the pipeline's
+:func:`~wavestack.pipeline.build_fitter` (the same fitter the station runs). The default method
+is ``"csf-qcm"``: Noll's RMS-normalised Zernike polynomials on the CSF-QCM map of the long
+rounded rectangle onto the unit disk (the seed paper's Type II aperture), where the circle
+polynomials are far from orthogonal. ``"circle"`` and ``"qr"`` are the pipeline's others. The
+fit is Noll 1..``max_noll`` with nothing removed beforehand (tilt is an alignment signal here:
+image motion); piston (Noll 1) is fitted and dropped, the interferometer has no absolute phase.
+
+The mapped basis does not hold an exact physical tilt or defocus (the map is not affine), so a
+map of pure tilt leaves a small residual outside Noll 2..22; model and measurement are projected
+by the same linear operator, so the estimate sees the same projection of both.
 """
 
 from __future__ import annotations
@@ -18,28 +21,39 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.pipeline.zernike import noll_to_nm, zernike_basis
+from wavestack.pipeline import Fitter, InvalidFrame, build_fitter
 
-__all__ = ["TermFitter"]
+__all__ = ["FIT_METHODS", "TermFitter"]
 
 FloatArray = NDArray[np.float64]
+
+#: Methods of :func:`~wavestack.pipeline.build_fitter` the loop accepts.
+FIT_METHODS: tuple[str, ...] = ("csf-qcm", "circle", "qr")
 
 
 @dataclass(frozen=True, eq=False)
 class TermFitter:
-    """Least-squares Noll terms 2..``max_noll`` of maps on one aperture.
+    """Noll terms 2..``max_noll`` of maps on one aperture (module notes).
 
     Parameters
     ----------
     mask : ndarray (H, W) of bool
-        The aperture (at least ``max_noll`` pixels).
+        The aperture (one connected region without holes for ``csf-qcm``).
     max_noll : int
-        Highest Noll index fitted (>= 4).
+        Highest Noll index fitted, 4 .. 66.
+    method : str
+        One of :data:`FIT_METHODS`.
+
+    Raises
+    ------
+    ValueError
+        A mask too small, ``max_noll`` or ``method`` out of range, or an aperture the method
+        cannot fit (the pipeline's message).
 
     Examples
     --------
-    >>> mask = np.ones((16, 48), bool)
-    >>> fitter = TermFitter(mask, 11)
+    >>> mask = np.zeros((40, 100), bool); mask[5:35, 5:95] = True
+    >>> fitter = TermFitter(mask, 11, method="circle")
     >>> w = fitter.synthesise(np.eye(10)[2])  # Noll 4 = 1 wave RMS
     >>> bool(np.allclose(fitter.terms(w), np.eye(10)[2]))
     True
@@ -47,27 +61,24 @@ class TermFitter:
 
     mask: NDArray[np.bool_]
     max_noll: int = 22
-    _basis: FloatArray = field(init=False, repr=False)
-    _pinv: FloatArray = field(init=False, repr=False)
+    method: str = "csf-qcm"
+    _fitter: Fitter = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         mask = np.asarray(self.mask, dtype=bool)
-        if mask.ndim != 2 or int(mask.sum()) < max(self.max_noll, 4) * 3:
-            raise ValueError(f"mask: expected a 2-D aperture of at least {3 * max(self.max_noll, 4)} pixels, "
-                             f"got shape {mask.shape} with {int(mask.sum())}")
         if not 4 <= self.max_noll <= 66:
             raise ValueError(f"max_noll: expected 4 .. 66, got {self.max_noll}")
-        rows, cols = np.nonzero(mask)
-        cy, cx = (rows.min() + rows.max()) / 2, (cols.min() + cols.max()) / 2
-        radius = float(np.hypot(rows.max() - rows.min() + 1, cols.max() - cols.min() + 1) / 2)
-        x, y = (cols - cx) / radius, (cy - rows) / radius  # x right, y up
-        basis = zernike_basis([noll_to_nm(j) for j in range(1, self.max_noll + 1)], x, y)
-        condition = np.linalg.cond(basis)
-        if not condition < 1e4:
-            raise ValueError(f"mask: the Zernike basis is ill conditioned on this aperture (cond {condition:.3g})")
+        if self.method not in FIT_METHODS:
+            raise ValueError(f"method: expected one of {FIT_METHODS}, got {self.method!r}")
+        if mask.ndim != 2 or int(mask.sum()) < self.max_noll * 3:
+            raise ValueError(f"mask: expected a 2-D aperture of at least {3 * self.max_noll} pixels, "
+                             f"got shape {mask.shape} with {int(mask.sum())}")
+        try:
+            fitter = build_fitter(mask, method=self.method, modes=self.max_noll, ordering="noll", dtype=np.float64)
+        except ValueError as error:  # IllConditionedBasis, UnsupportedAperture are ValueErrors
+            raise ValueError(f"mask: the {self.method} fitter cannot be built on this aperture: {error}") from None
         object.__setattr__(self, "mask", mask)
-        object.__setattr__(self, "_basis", basis)
-        object.__setattr__(self, "_pinv", np.linalg.pinv(basis))
+        object.__setattr__(self, "_fitter", fitter)
 
     @property
     def count(self) -> int:
@@ -85,13 +96,19 @@ class TermFitter:
         values = np.asarray(waves, dtype=np.float64)
         if values.shape != self.mask.shape:
             raise ValueError(f"waves: expected shape {self.mask.shape}, got {values.shape}")
-        on = values[self.mask]
-        if not np.all(np.isfinite(on)):
-            raise ValueError(f"waves: {int((~np.isfinite(on)).sum())} non-finite pixels on the aperture")
-        return (self._pinv @ on)[1:]
+        bad = int((~np.isfinite(values[self.mask])).sum())
+        if bad:
+            raise ValueError(f"waves: {bad} non-finite pixels on the aperture")
+        try:
+            result = self._fitter.fit(values)
+        except InvalidFrame as error:
+            raise ValueError(f"waves: {error}") from None
+        return np.asarray(result.coefficients[1:], dtype=np.float64)
 
     def synthesise(self, terms: NDArray[np.floating]) -> FloatArray:
         """The map of Noll 2..max_noll ``terms`` on the aperture (NaN outside), shape (H, W)."""
-        out = np.full(self.mask.shape, np.nan)
-        out[self.mask] = self._basis[:, 1:] @ np.asarray(terms, dtype=np.float64)
-        return out
+        values = np.asarray(terms, dtype=np.float64)
+        if values.shape != (self.count,):
+            raise ValueError(f"terms: expected {self.count} values (Noll 2..{self.max_noll}), got {values.shape}")
+        out = self._fitter.surface(np.concatenate([[0.0], values]))
+        return np.where(self.mask, out, np.nan)

@@ -60,6 +60,10 @@ class AlignSettings:
     averaged: int = setting(3, minimum=1, maximum=100, doc="valid station maps averaged per field point")
     edge_px: int = setting(2, minimum=0, maximum=20, doc="pupil rim pixels left out of the fixed aperture "
                                                          "(station measurements)")
+    fit_method: str = setting("csf-qcm", choices=("csf-qcm", "circle", "qr"),
+                              doc="the fitter of the terms, model and measurement alike (the pipeline's)")
+    null_tilt: bool = setting(True, doc="the interferometer's reference takes out the tilt at each field point "
+                                        "(added back from its setting; station measurements)")
     simulator: AlignBenchSettings = setting(AlignBenchSettings(), doc="[align.simulator]")
 
 
