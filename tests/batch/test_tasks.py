@@ -14,36 +14,8 @@ from wavestack.batch.campaign import assemble
 from wavestack.batch.plan import whole_recording
 from wavestack.batch.rows import ResultRow
 from wavestack.pipeline import build_fitter
-from wavestack.recording import RecordingReader, recorded_config, replay
-from wavestack.recording.replay import ReplayedResult
 
-#: Fields of a replayed result a batch row must reproduce exactly (ReplayedResult.to_json's).
-COMPARED = ("index", "frame_ids", "valid", "reason", "coefficients", "fitter", "fitter_fallback", "unwrap_path",
-            "residual_rms", "residual_pv", "difference_rms", "residual_pv_difference", "affected_by_damage")
-
-
-def replayed_rows(path: Path) -> list[dict[str, object]]:
-    """``wavestack replay``'s results of ``path`` (recorded settings) as comparable dicts."""
-    with RecordingReader(path) as reader:
-        items = [r for r in replay(reader, recorded_config(reader, path), same_settings=True)
-                 if isinstance(r, ReplayedResult)]
-    return [comparable(r.to_json() | {"aperture_id": -1 if r.processed.choice is None
-                                      else r.processed.choice.aperture_id}) for r in items]
-
-
-def comparable(values: dict[str, object]) -> dict[str, object]:
-    """The compared fields, None and NaN alike (the table stores NaN for 'not compared'), tuples as lists."""
-    out: dict[str, object] = {}
-    for key in (*COMPARED, "aperture_id"):
-        value = values.get(key)
-        value = list(value) if isinstance(value, (tuple, list)) else value
-        out[key] = None if value is None or (isinstance(value, float) and math.isnan(value)) else value
-        if key in ("reason", "fitter", "unwrap_path") and out[key] is None:  # the table stores ""
-            out[key] = ""
-    return out
-
-
-def test_blocks_of_a_large_recording_give_the_rows_of_one_replay(campaign) -> None:
+def test_blocks_of_a_large_recording_give_the_rows_of_one_replay(campaign, replayed_rows, comparable) -> None:
     plan = plan_recording(str(campaign.masked), None, min_block_sets=3)
     assert len(plan.tasks) == 2 and plan.tasks[0].check_next, plan  # divided where the masked optic was adopted
     outcomes = [analyse(task) for task in plan.tasks]

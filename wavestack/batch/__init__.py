@@ -10,7 +10,7 @@ written by the client only), :mod:`~wavestack.batch.progress` (sets done, rate, 
 
 from __future__ import annotations
 
-from wavestack.batch.campaign import CampaignReport, plan_only, run_campaign
+from wavestack.batch.campaign import CampaignPlan, CampaignReport, assemble, prepare_campaign, run_campaign
 from wavestack.batch.cluster import campaign_client, local_workers
 from wavestack.batch.plan import MIN_BLOCK_SETS, RecordingPlan, Task, file_sha256, plan_recording, settings_hash
 from wavestack.batch.progress import Progress, progress_bar
@@ -18,7 +18,7 @@ from wavestack.batch.rows import ResultRow, SkippedItem, TaskOutcome
 from wavestack.batch.table import RecordingSummary, ResultsStore
 from wavestack.batch.task import analyse, fit_block
 
-__all__ = ["CampaignReport", "MIN_BLOCK_SETS", "Progress", "RecordingPlan", "RecordingSummary", "ResultRow",
+__all__ = ["CampaignPlan", "CampaignReport", "assemble", "prepare_campaign", "MIN_BLOCK_SETS", "Progress", "RecordingPlan", "RecordingSummary", "ResultRow",
            "ResultsStore", "SkippedItem", "Task", "TaskOutcome", "analyse", "campaign_client", "file_sha256",
-           "fit_block", "local_workers", "plan_only", "plan_recording", "progress_bar", "run_campaign",
+           "fit_block", "local_workers", "plan_recording", "progress_bar", "run_campaign",
            "settings_hash"]

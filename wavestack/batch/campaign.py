@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from wavestack.batch.plan import MIN_BLOCK_SETS, RecordingPlan, Task, plan_recording, whole_recording
+from wavestack.batch.plan import MIN_BLOCK_SETS, RecordingPlan, plan_recording, whole_recording
 from wavestack.batch.progress import Progress
 from wavestack.batch.rows import ResultRow, TaskOutcome, renumbered
 from wavestack.batch.table import RecordingSummary, ResultsStore
@@ -52,16 +52,32 @@ class _Pending:
     tasks: int = 0
 
 
-def run_campaign(paths: Sequence[str], store: ResultsStore, client: object, *, config_text: str | None = None,
-                 resume: bool = False, on_progress: Callable[[Progress], None] = lambda p: None,
-                 on_recording: Callable[[RecordingSummary], None] = lambda s: None,
-                 min_block_sets: int = MIN_BLOCK_SETS) -> CampaignReport:
-    """Analyse ``paths`` on ``client`` (a ``distributed.Client``) into ``store``.
+@dataclass(frozen=True)
+class CampaignPlan:
+    """What a campaign will run: the recordings to analyse and those the results already hold.
+
+    Attributes
+    ----------
+    plans : tuple of RecordingPlan
+    resumed : tuple of str
+        Recordings skipped: already committed with the same file and settings (``--resume``), or
+        a second copy of a file given twice.
+    config_text : str or None
+    """
+
+    plans: tuple[RecordingPlan, ...]
+    resumed: tuple[str, ...]
+    config_text: str | None
+
+
+def prepare_campaign(paths: Sequence[str], store: ResultsStore, *, config_text: str | None = None,
+                     resume: bool = False, min_block_sets: int = MIN_BLOCK_SETS) -> CampaignPlan:
+    """Hash and plan every recording (in this process, before any cluster starts).
 
     Parameters
     ----------
     paths : sequence of str
-        Recordings (station, polish; other files are reported and skipped).
+        Recordings (station, polish; other files are planned as reported skips).
     config_text : str, optional
         Station configuration (TOML) to process with; None: each recording's own.
     resume : bool
@@ -76,14 +92,6 @@ def run_campaign(paths: Sequence[str], store: ResultsStore, client: object, *, c
     if store.has_results() and not resume:
         raise InputError(f"{store.root}: already holds results; pass --resume to continue that campaign, "
                          "or choose another --out")
-    plans, resumed = _plans_to_run(paths, store, config_text, resume, min_block_sets)
-    if plans:
-        store.write_settings(plans[0].settings_hash, config_text)
-    return _execute(plans, resumed, store, client, on_progress, on_recording)
-
-
-def _plans_to_run(paths: Sequence[str], store: ResultsStore, config_text: str | None, resume: bool,
-                  min_block_sets: int) -> tuple[list[RecordingPlan], list[str]]:
     done = store.done_keys() if resume else set()
     plans, resumed, seen = [], [], set()
     for path in paths:
@@ -94,7 +102,26 @@ def _plans_to_run(paths: Sequence[str], store: ResultsStore, config_text: str | 
             continue
         seen.add(key)
         plans.append(plan)
-    return plans, resumed
+    return CampaignPlan(tuple(plans), tuple(resumed), config_text)
+
+
+def run_campaign(campaign: CampaignPlan, store: ResultsStore, client: object, *,
+                 on_progress: Callable[[Progress], None] = lambda p: None,
+                 on_recording: Callable[[RecordingSummary], None] = lambda s: None) -> CampaignReport:
+    """Run ``campaign``'s tasks on ``client`` (a ``distributed.Client``), committing each recording
+    to ``store`` as soon as all its tasks are back.
+
+    Example
+    -------
+    ``wavestack batch`` does, in short::
+
+        campaign = prepare_campaign(paths, store)
+        with campaign_client(None, 2) as client:
+            report = run_campaign(campaign, store, client)
+    """
+    if campaign.plans:
+        store.write_settings(campaign.plans[0].settings_hash, campaign.config_text)
+    return _execute(list(campaign.plans), list(campaign.resumed), store, client, on_progress, on_recording)
 
 
 def _execute(plans: list[RecordingPlan], resumed: list[str], store: ResultsStore, client: object,
@@ -178,7 +205,3 @@ def _stem(path: str) -> str:
     name = path.replace("\\", "/").rsplit("/", 1)[-1]
     return name.rsplit(".", 1)[0] or "recording"
 
-
-def plan_only(paths: Sequence[str], config_text: str | None = None) -> list[Task]:
-    """Every task a campaign of ``paths`` would run (for inspection and benchmarks)."""
-    return [t for p in paths for t in plan_recording(str(p), config_text).tasks]

@@ -52,7 +52,7 @@ def run_batch(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Run the campaign; 0 when every recording was analysed whole, 2 when some were not."""
     import distributed  # noqa: F401 - configures its loggers on import; quietened below
 
-    from wavestack.batch import ResultsStore, campaign_client, run_campaign
+    from wavestack.batch import CampaignReport, ResultsStore, campaign_client, prepare_campaign, run_campaign
 
     if args.scheduler is not None and args.workers is not None:
         parser.error("--workers sizes the local cluster; a remote cluster's workers are started with dask worker")
@@ -60,10 +60,13 @@ def run_batch(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         logging.getLogger("distributed").setLevel(logging.WARNING)
     config_text = load_station_config(args.config).text if args.config else None
     store = ResultsStore(args.out)
+    campaign = prepare_campaign(args.recordings, store, config_text=config_text, resume=args.resume)
     view = _View(args.json)
-    with campaign_client(args.scheduler, args.workers) as client:
-        report = run_campaign(args.recordings, store, client, config_text=config_text, resume=args.resume,
-                              on_progress=view.progress, on_recording=view.recording)
+    if campaign.plans:
+        with campaign_client(args.scheduler, args.workers) as client:
+            report = run_campaign(campaign, store, client, on_progress=view.progress, on_recording=view.recording)
+    else:
+        report = CampaignReport(resumed=campaign.resumed)
     view.finish(report)
     incomplete = [s for s in report.analysed if s.status != "ok"]
     for summary in incomplete:
