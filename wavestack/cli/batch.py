@@ -10,6 +10,7 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.outputs import json_text
 from wavestack.config import load_station_config
@@ -29,23 +30,13 @@ def add_batch_arguments(parser: argparse.ArgumentParser) -> None:
                                                     "each recording's own settings")
     parser.add_argument("--scheduler", metavar="tcp://HOST:8786",
                         help="a running Dask scheduler (default: a local cluster on this machine)")
-    parser.add_argument("--workers", type=_positive, metavar="N",
+    parser.add_argument("--workers", type=positive_int, metavar="N",
                         help="worker processes of the local cluster (default: one per CPU)")
     parser.add_argument("--out", type=Path, required=True, metavar="RESULTS",
                         help="results directory (Parquet: results/, summaries/, settings.parquet)")
     parser.add_argument("--resume", action="store_true",
                         help="skip recordings already in RESULTS with the same file and settings")
     parser.add_argument("--json", action="store_true", help="progress and summaries as JSON lines on stdout")
-
-
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
-    return value
 
 
 def run_batch(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
