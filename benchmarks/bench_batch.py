@@ -1,0 +1,134 @@
+"""Benchmark of ``wavestack batch``: sets per second on 1 and 2 local workers, against the station's
+processing stages alone in one process.
+
+Run:  .venv/bin/python benchmarks/bench_batch.py [--recordings 20] [--sets 12] [--cache DIR]
+
+The campaign: one recording made by ``wavestack run --record`` on the small simulated station
+(256 x 256, 5-frame sets), then ``--recordings`` recordings written from its sets with seeded
+noise added to the pixels (each its own file, hash and fitter builds), generated once into the
+cache directory. Each run starts a local cluster, imports wavestack on every worker (``client.run``)
+and only then times ``run_campaign``: cluster start-up and imports are paid once per campaign, not
+per set. The baseline is ``build_processor(config, background_builds=False).process`` on the same
+sets, read into memory beforehand, one fresh processor per recording (as a replay builds one), in
+this process. Printed with ``uptime``'s load: on a shared machine, the ratios of one run are what
+survives, not the absolute rates.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_name] = "1"  # as wavestack's CLI: before numpy loads; the workers inherit it
+
+import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+import logging  # noqa: E402
+import shutil  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from wavestack.batch import ResultsStore, campaign_client, prepare_campaign, run_campaign  # noqa: E402
+from wavestack.config import parse_station_config  # noqa: E402
+from wavestack.recording import FRAME_METADATA, RecordingReader, RecordingWriter  # noqa: E402
+from wavestack.station import build_processor  # noqa: E402
+
+SMALL = Path(__file__).resolve().parents[1] / "tests" / "configs" / "station-small.toml"
+CLI = "import sys; from wavestack.cli import main; sys.exit(main())"
+
+
+def make_campaign(cache: Path, recordings: int, sets: int) -> list[Path]:
+    """The campaign's files (made once; kept in ``cache``)."""
+    paths = [cache / f"rec-{n:03d}.h5" for n in range(recordings)]
+    if all(p.exists() for p in paths):
+        return paths
+    cache.mkdir(parents=True, exist_ok=True)
+    base = cache / "base.h5"
+    base.unlink(missing_ok=True)
+    subprocess.run([sys.executable, "-c", CLI, "run", "--config", str(SMALL), "--frames", str(sets), "--record",
+                    str(base)], check=True, capture_output=True, timeout=600)
+    with RecordingReader(base) as reader:
+        originals = [reader.read_set(i) for i in range(reader.n_sets)]
+        header = dict(config_toml=reader.config_toml, conventions=reader.conventions,
+                      software_version=reader.software_version, frame_shape=reader.frame_shape,
+                      frame_dtype=reader.frame_dtype, frames_per_set=len(originals[0]),
+                      metadata_keys=FRAME_METADATA, result_template={k: v[0] for k, v in reader.results().items()})
+    for n, path in enumerate(paths):
+        rng = np.random.default_rng(n)
+        with RecordingWriter(path, overwrite=True, **header) as writer:
+            for index, frames in enumerate(originals):
+                noisy = [dataclasses.replace(f, pixels=np.clip(f.pixels + rng.normal(0, 4.0, f.pixels.shape), 0,
+                                                               4095).astype(f.pixels.dtype)) for f in frames]
+                writer.append_set(index, noisy)
+    return paths
+
+
+def batch_rate(paths: list[Path], workers: int, out: Path) -> tuple[float, int, list]:
+    """(seconds, sets, summaries) of one campaign on a fresh local cluster of ``workers``."""
+    shutil.rmtree(out, ignore_errors=True)
+    store = ResultsStore(out)
+    campaign = prepare_campaign([str(p) for p in paths], store)
+    with campaign_client(None, workers) as client:
+        client.run(__import__, "wavestack.batch.task")  # imports paid before the clock starts
+        tick = time.perf_counter()
+        report = run_campaign(campaign, store, client)
+        seconds = time.perf_counter() - tick
+    return seconds, sum(s.results + s.skipped for s in report.analysed), list(report.analysed)
+
+
+def stages_alone(paths: list[Path]) -> tuple[float, int]:
+    """(seconds, sets) of the processing stages alone, one processor per recording, sets in memory."""
+    seconds, count = 0.0, 0
+    for path in paths:
+        with RecordingReader(path) as reader:
+            config = parse_station_config(reader.config_toml, source=str(path))
+            sets = [[f.pixels for f in reader.read_set(i)] for i in range(reader.n_sets)]
+        tick = time.perf_counter()
+        processor = build_processor(config, background_builds=False)
+        try:
+            for frames in sets:
+                processor.process(frames)
+        finally:
+            processor.close()
+        seconds += time.perf_counter() - tick
+        count += len(sets)
+    return seconds, count
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--recordings", type=int, default=20)
+    parser.add_argument("--sets", type=int, default=12, help="sets per recording")
+    parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "wavestack-bench-batch")
+    args = parser.parse_args()
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    paths = make_campaign(args.cache, args.recordings, args.sets)
+    load_before = os.getloadavg()
+    out = args.cache / "results"
+    first_s, alone_sets = stages_alone(paths)  # before and after the campaigns: the load drifts
+    one_s, sets, summaries = batch_rate(paths, 1, out)
+    two_s, _, _ = batch_rate(paths, 2, out)
+    last_s, _ = stages_alone(paths)
+    alone_s = (first_s + last_s) / 2
+    load_after = os.getloadavg()
+    stage = {k: sum(getattr(s, f"{k}_s") for s in summaries) for k in ("phase", "aperture", "unwrap", "fit")}
+    total = sum(stage.values()) or 1.0
+    print(f"campaign: {len(paths)} recordings, {sets} sets (256 x 256, 5 frames each), cores: {os.cpu_count()}")
+    print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f} (shared machine: ratios, not rates)")
+    print(f"1 worker : {sets / one_s:7.2f} sets/s ({one_s:.2f} s)")
+    print(f"2 workers: {sets / two_s:7.2f} sets/s ({two_s:.2f} s), {one_s / two_s:.2f}x the 1-worker rate "
+          "(target >= 1.7x)")
+    print(f"stages alone, one process: {1e3 * alone_s / alone_sets:.1f} ms/set (mean of {1e3 * first_s / alone_sets:.1f}"
+          f" before and {1e3 * last_s / alone_sets:.1f} after the campaigns); batch on 1 worker "
+          f"{1e3 * one_s / sets:.1f} ms/set, {one_s / sets / (alone_s / alone_sets):.2f}x (target <= 1.5x)")
+    print("share of the workers' stage time: " + ", ".join(f"{k} {100 * v / total:.0f} %" for k, v in stage.items())
+          + " (aperture includes the fitter builds of each recording's first set)")
+
+
+if __name__ == "__main__":  # the workers are spawned: nothing may run on import
+    main()
