@@ -215,7 +215,7 @@ def build_fitter(
         How frames are projected on the basis. ``auto``: by separable Legendre moments (one pass
         over the frame, no N x M operator; :mod:`wavestack.pipeline.fit.moment_projection`) for
         the polynomial methods ``circle`` and ``qr`` where the moments keep float64 precision
-        (``diagnostics.moment_amplification`` at most 1e5), else by a stored operator (always
+        (``diagnostics.moment_amplification`` at most 3e4), else by a stored operator (always
         for the mapped methods, whose columns are not polynomials). ``moments`` insists (raises
         where precision would be lost), ``operator`` keeps the operator. ``diagnostics.refit``
         says which was built.

@@ -16,15 +16,18 @@ fitted pixels are therefore split into S horizontal strips, each with its own bo
 rows by the columns its fitted pixels span), whose corners lie within a strip height of a fitted
 pixel: measured on a disk at degree 20, the largest absolute row sum of the coefficients
 (:func:`amplification`) is 4.9e7 for one box, 2.4e5 for 8 strips, 1.1e4 for 16 and 920 for 32;
-at degree 7 it is 384 on one box. The build doubles S until it is at most
-``MAX_AMPLIFICATION``.
+at degree 7 it is 384 on one box. Turning the orthonormal coefficients into those of an
+ill-conditioned basis multiplies errors by a further sqrt(kappa(G)). The build doubles S until
+that product is at most ``MAX_AMPLIFICATION`` (3e4: 16 strips on a disk at degree 20, one box at
+degree 7); where no strip count reaches it (kappa(G) above ~1e8) the operator path is used.
 
 Precision. Frames are moved to float64 before any product and the moments accumulate in float64
 (BLAS dgemm): float32 accumulation loses ~1e-7 of each moment, which the amplification above
 turns into ~1e-3 at degree 20. In float64 each moment carries ~1e-16 relative to the sum of
 |w| over the strip, so the coefficients agree with an explicit operator to about
-``amplification * 1.1e-16`` (norm-wise): at most 1.1e-11 under ``MAX_AMPLIFICATION`` = 1e5,
-measured 1e-13 to 1e-11 at degree 20 against the float64 operator path.
+``30 * 1.1e-16 * amplification`` (norm-wise, measured): 1e-10 at ``MAX_AMPLIFICATION``; the
+property tests (``tests/pipeline/fit/test_moments.py``) hold it to 1e-9 against the float64
+operator path over random apertures, pupils and orderings up to degree 20.
 
 The Gram matrix of the fitted pixels comes from moments of the mask: the products
 ``P_b P_b'`` are linearised exactly into Legendre polynomials of degree <= 2D (Adams 1878;
@@ -44,10 +47,12 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 ColumnFunction = Callable[[FloatArray, FloatArray], FloatArray]  # (x, y) of shape (Q,) -> (Q, K)
 
-# Largest coefficient row sum (see module docstring) the moment path accepts: keeps its rounding
-# (amplification * 1.1e-16 = 1.1e-11 relative) two orders below the 1e-9 agreement promised
-# against the operator path.
-MAX_AMPLIFICATION = 1e5
+# Largest effective amplification (coefficient row sum times sqrt(kappa(G)) of the basis, see the
+# module docstring) the moment path accepts. Measured, the coefficients then differ from the
+# float64 operator path's by about 30 * 1.1e-16 * amplification: 1e-10 at this limit, a decade
+# below the 1e-9 agreement promised. Each doubling of the strips adds a coefficient block read
+# per frame (K x (D+1)(D+2)/2 float64: 0.43 MB at 231 modes), so the limit is not set lower.
+MAX_AMPLIFICATION = 3e4
 
 
 @dataclass(frozen=True)
@@ -100,18 +105,19 @@ def strips_of(mask: NDArray[np.bool_], count: int) -> list[Strip]:
 
 
 def column_coefficients(
-    columns: ColumnFunction, strip: Strip, pixel_to_unit: Callable, degree: int
-) -> FloatArray:
-    """Coefficients of polynomial columns in the strip's products ``P_b(v) P_a(u)``, a + b <= D.
+    columns: ColumnFunction, strips: list[Strip], pixel_to_unit: Callable, degree: int
+) -> list[FloatArray]:
+    """Coefficients of polynomial columns in each strip's products ``P_b(v) P_a(u)``, a + b <= D.
 
     Gauss-Legendre quadrature with D + 1 nodes per axis is exact for the projection of a
     polynomial of degree <= D in each variable, so the coefficients are exact up to rounding.
+    The columns are evaluated once, at the nodes of every strip together.
 
     Parameters
     ----------
     columns : callable
         ``columns(x, y)`` gives the column values, shape (Q, K), at unit-disk points.
-    strip : Strip
+    strips : list of Strip
     pixel_to_unit : callable
         ``pixel_to_unit(rows, cols)`` gives (x, y) of pixel positions (floats).
     degree : int
@@ -119,19 +125,24 @@ def column_coefficients(
 
     Returns
     -------
-    ndarray, shape (K, (D+1)(D+2)/2)
-        In the order of :func:`triangle_index`.
+    list of ndarray, shape (K, (D+1)(D+2)/2) each
+        One per strip, in the order of :func:`triangle_index`.
     """
     nodes, weights = legendre.leggauss(degree + 1)
-    row_mid, row_half = scaled_coordinates(strip.row0, strip.row1)
-    col_mid, col_half = scaled_coordinates(strip.col0, strip.col1)
-    node_rows, node_cols = np.meshgrid(row_mid + row_half * nodes, col_mid + col_half * nodes, indexing="ij")
-    x, y = pixel_to_unit(node_rows.ravel(), node_cols.ravel())
-    values = columns(x, y)  # (Q, K), Q ordered [row node, column node]
+    grid_rows, grid_cols = [], []
+    for strip in strips:
+        row_mid, row_half = scaled_coordinates(strip.row0, strip.row1)
+        col_mid, col_half = scaled_coordinates(strip.col0, strip.col1)
+        node_rows, node_cols = np.meshgrid(row_mid + row_half * nodes, col_mid + col_half * nodes, indexing="ij")
+        grid_rows.append(node_rows.ravel())
+        grid_cols.append(node_cols.ravel())
+    x, y = pixel_to_unit(np.concatenate(grid_rows), np.concatenate(grid_cols))
+    values = np.asarray(columns(x, y))  # (S * Q, K), each strip's Q ordered [row node, column node]
     projector = legendre.legvander(nodes, degree) * weights[:, None] * ((2 * np.arange(degree + 1) + 1) / 2.0)
-    grid = np.asarray(values.T).reshape(-1, degree + 1, degree + 1)
-    full = np.einsum("ib,kij,ja->kba", projector, grid, projector, optimize=True)
-    return full.reshape(full.shape[0], -1)[:, triangle_index(degree)]
+    grid = values.T.reshape(values.shape[1], len(strips), degree + 1, degree + 1)
+    full = projector.T @ grid.transpose(1, 0, 2, 3) @ projector  # (S, K, b, a)
+    flat = full.reshape(len(strips), values.shape[1], -1)[:, :, triangle_index(degree)]
+    return [np.ascontiguousarray(block) for block in flat]
 
 
 def amplification(coefficients: FloatArray) -> float:
@@ -144,7 +155,8 @@ def _linearisation(degree: int) -> FloatArray:
     nodes, weights = legendre.leggauss(2 * degree + 1)  # exact to degree 4D + 1 >= 3D
     low = legendre.legvander(nodes, degree)
     high = legendre.legvander(nodes, 2 * degree) * weights[:, None] * ((2 * np.arange(2 * degree + 1) + 1) / 2.0)
-    return np.einsum("qa,qb,qc->abc", low, low, high, optimize=True)
+    pairs = (low[:, :, None] * low[:, None, :]).reshape(nodes.size, -1)
+    return (pairs.T @ high).reshape(degree + 1, degree + 1, 2 * degree + 1)
 
 
 @dataclass(frozen=True)
@@ -178,8 +190,9 @@ def mask_moments(mask: NDArray[np.bool_], strip: Strip, degree: int,
     rows = legendre_table(strip.row0, strip.row1, 2 * degree)
     cols = legendre_table(strip.col0, strip.col1, 2 * degree)
     mu = (rows.T @ box) @ cols
-    full = np.einsum("bBd,dc,aAc->baBA", lam, mu, lam, optimize=True)
+    flat_lam = lam.reshape(-1, lam.shape[2])  # rows (b, B)
     size = (degree + 1) ** 2
+    full = (flat_lam @ mu @ flat_lam.T).reshape((degree + 1,) * 4).transpose(0, 2, 1, 3)  # [b, a, B, A]
     index = triangle_index(degree)
     gram = full.reshape(size, size)[np.ix_(index, index)]
     sums = mu[: degree + 1, : degree + 1].reshape(-1)[index]

@@ -14,6 +14,7 @@ The work done once per aperture, with nothing of size N x M (N fitted pixels, M 
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ from .coefficient_maps import coefficient_maps
 from .fitter import Fitter
 from .moment_projection import MomentProjection, MomentState
 from .normal_equations import NormalEquations
-from .orthonormal import check_condition, cholesky_factor
+from .orthonormal import check_condition, cholesky_factor, factor_quality
 from .physical_terms import physical_term_basis
 from .results import FitBasis, FitterDiagnostics, Pupil
 
@@ -50,8 +51,10 @@ logger = logging.getLogger(__name__)
 # Same tolerance as the operator path's samples (:mod:`wavestack.pipeline.fit.sampling`).
 _PUPIL_TOLERANCE = 1e-9
 _MASK_BLOCK_ROWS = 256
-# Strip counts tried, doubling: past 64 strips the coefficients outweigh the frame they replace.
+# Strip counts tried, doubling: past 64 strips the coefficients outweigh the frame they replace,
+# and strips thinner than 4 rows gain nothing.
 _MAX_STRIPS = 64
+_MIN_STRIP_ROWS = 4
 
 
 @dataclass(frozen=True)
@@ -69,8 +72,9 @@ class MomentFactors:
         ``A^T A`` of the orthonormalised columns.
     column_sums : ndarray, shape (M + k,)
     amplification : float
-        The largest coefficient row sum of the stored columns (rounding factor, see
-        :mod:`wavestack.pipeline.fit.legendre_moments`).
+        The largest coefficient row sum of the stored columns times sqrt(kappa(G)) of the basis:
+        the factor by which float64 rounding of the moments reaches the reported coefficients
+        (see :mod:`wavestack.pipeline.fit.legendre_moments`).
     strips : int
     basis_seconds : float
         Time spent on the columns' coefficients (the rest is the factorisation).
@@ -118,7 +122,7 @@ def _coefficients(columns: ColumnFunction, strips: list, pupil: Pupil, degree: i
     def to_unit(rows: NDArray, cols: NDArray) -> tuple[NDArray, NDArray]:
         return (cols - pupil.cx) / pupil.radius, (pupil.cy - rows) / pupil.radius
 
-    return [column_coefficients(columns, strip, to_unit, degree) for strip in strips]
+    return column_coefficients(columns, strips, to_unit, degree)
 
 
 def _orthonormal(
@@ -146,7 +150,8 @@ def build_moments(
     terms: ColumnFunction | None = None,
 ) -> MomentFactors | None:
     """Moment factors of polynomial columns on the pixels of ``mask``, or None when even the
-    finest strips leave the amplification above ``MAX_AMPLIFICATION`` (use the operator then).
+    finest strips leave the effective amplification above ``MAX_AMPLIFICATION`` (use the
+    operator then: an ill-conditioned basis, kappa(G) above ~1e8, always does).
 
     Parameters
     ----------
@@ -169,25 +174,33 @@ def build_moments(
         As :func:`~wavestack.pipeline.fit.orthonormal.orthonormalise`.
     """
     n = int(np.count_nonzero(mask))
-    count, factors = 1, None
-    while count <= _MAX_STRIPS:
-        strips = strips_of(mask, count)
-        factors = _factors(mask, strips, pupil, basis, degree, what, terms, n)
-        logger.debug("moments: %d strips, amplification %.3g", len(strips), factors.amplification)
-        if factors.amplification <= MAX_AMPLIFICATION or len(strips) < count:
-            break
-        count *= 2
-    if factors is None or factors.amplification > MAX_AMPLIFICATION:
-        return None
-    return factors
-
-
-def _factors(mask: NDArray[np.bool_], strips: list, pupil: Pupil, basis: ColumnFunction, degree: int,
-             what: str, terms: ColumnFunction | None, n: int) -> MomentFactors:
-    moments = strip_moments(mask, strips, degree)
-    tick = time.perf_counter()
+    rows = int(np.count_nonzero(mask.any(axis=1)))
+    most = max(1, min(_MAX_STRIPS, rows // _MIN_STRIP_ROWS))
+    started = time.perf_counter()
+    count = 1  # the fewest strips whose basis coefficients alone pass (cheap: no Gram matrix)
+    strips = strips_of(mask, count)
     coefficients = _coefficients(basis, strips, pupil, degree)
-    basis_seconds = time.perf_counter() - tick
+    while count < most and max(amplification(t) for t in coefficients) > MAX_AMPLIFICATION:
+        count *= 2
+        strips = strips_of(mask, min(count, most))
+        coefficients = _coefficients(basis, strips, pupil, degree)
+    seconds = time.perf_counter() - started
+    while True:
+        factors = _factors(mask, strips, pupil, coefficients, degree, what, terms, n)
+        logger.debug("moments: %d strips, effective amplification %.3g", factors.strips, factors.amplification)
+        if factors.amplification <= MAX_AMPLIFICATION:
+            return dataclasses.replace(factors, basis_seconds=seconds)
+        if count >= most:
+            return None
+        count *= 2
+        strips = strips_of(mask, min(count, most))
+        coefficients = _coefficients(basis, strips, pupil, degree)
+
+
+def _factors(mask: NDArray[np.bool_], strips: list, pupil: Pupil, coefficients: list[NDArray], degree: int,
+             what: str, terms: ColumnFunction | None, n: int) -> MomentFactors:
+    """The factors on these strips, from the basis' coefficients on them."""
+    moments = strip_moments(mask, strips, degree)
     columns, triangular = _orthonormal(coefficients, moments, n, what)
     removal_triangular = None
     if terms is not None:
@@ -198,8 +211,9 @@ def _factors(mask: NDArray[np.bool_], strips: list, pupil: Pupil, basis: ColumnF
     transform = np.hstack(columns)
     state = MomentState(mask, np.array([[s.row0, s.row1, s.col0, s.col1] for s in strips], dtype=np.int64),
                         degree, transform)
-    return MomentFactors(state, triangular, removal_triangular, gram, sums,
-                         max(amplification(c) for c in columns), len(strips), basis_seconds)
+    kappa, _ = factor_quality(triangular)  # the map to the basis' own coefficients adds sqrt(kappa(G))
+    effective = max(amplification(c) for c in columns) * float(np.sqrt(kappa))
+    return MomentFactors(state, triangular, removal_triangular, gram, sums, effective, len(strips))
 
 
 @dataclass(frozen=True)

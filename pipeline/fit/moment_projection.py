@@ -22,7 +22,7 @@ from .results import NanPolicy
 logger = logging.getLogger(__name__)
 
 # Float64 bytes of one chunk of a strip: small enough to stay in a 2 MB L2 cache with its source.
-_CHUNK_BYTES = 512 * 1024
+_CHUNK_BYTES = 1024 * 1024
 # Float64 bytes of the stacked chunk of a batched refit.
 _BATCH_BYTES = 8 * 1024 * 1024
 # Dropped samples above which their share of the Gram matrix comes from mask moments, not rows.
