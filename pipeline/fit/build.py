@@ -356,10 +356,8 @@ def _build(
         refit="operator",
         **_mapping_diagnostics(columns.mapping),
     )
-    logger.info(
-        "built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
-        method, len(mode_pairs), samples.x.size, factors.maps.kappa, timings["total"],
-    )
+    logger.info("built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
+                method, len(mode_pairs), samples.x.size, factors.maps.kappa, timings["total"])
     return Fitter(
         aperture=aperture,
         projection=OperatorProjection(aperture.shape, samples.flat_index, factors.operator),

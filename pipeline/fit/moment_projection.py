@@ -209,8 +209,8 @@ class MomentProjection:
     def residual(self, frame: NDArray, projected: Projected, terms: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], float]:
         """The residual map ``w - A @ terms`` (NaN off the fitted or finite samples) and its PV."""
-        fitted = self.evaluate(terms)
-        residual = np.asarray(frame, dtype=np.float64) - fitted
+        residual = self.evaluate(terms)  # NaN off the fitted pixels, which the subtraction keeps
+        np.subtract(frame, residual, out=residual)
         residual[~np.isfinite(residual)] = np.nan
         peak_to_valley = float(np.nanmax(residual)) - float(np.nanmin(residual))
         return residual, peak_to_valley
