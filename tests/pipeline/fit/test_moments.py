@@ -173,3 +173,37 @@ def test_a_stored_moment_fitter_round_trips(tmp_path) -> None:
     assert loaded.refit == "moments" and loaded.dtype == fitter.dtype and a.residual_rms == b.residual_rms
     with pytest.raises(AttributeError, match="keeps no operator"):
         loaded.operator
+
+
+def test_concentric_annular_zernike_columns_are_served_by_the_moment_algebra() -> None:
+    # No build_fitter method fits annular terms in pixel coordinates today (the mapped methods use
+    # them on the map's image); the moment algebra serves them as it serves the circle terms.
+    from functools import partial
+
+    from wavestack.pipeline import annular_zernike_basis
+    from wavestack.pipeline.fit.legendre_moments import (
+        column_coefficients, gram_of, legendre_table, strip_moments, strips_of, triangle_index)
+
+    size, radius, eps = 90, 42.0, 0.4
+    rows, cols = np.indices((size, size), dtype=float)
+    r = np.hypot(rows - 44.5, cols - 44.5)
+    mask = (r <= radius) & (r >= eps * radius)
+    modes = mode_list("noll", 66)  # up to n = 10
+    columns = partial(annular_zernike_basis, modes, obscuration=eps)
+    to_unit = lambda rr, cc: ((cc - 44.5) / radius, (44.5 - rr) / radius)  # noqa: E731
+    strips = strips_of(mask, 4)
+    coefficients = column_coefficients(lambda x, y: columns(x, y), strips, to_unit, 10)
+    pr, pc = np.nonzero(mask)
+    explicit = columns(*to_unit(pr.astype(float), pc.astype(float)))
+    values = np.empty_like(explicit)
+    for strip, t in zip(strips, coefficients):
+        inside = (pr >= strip.row0) & (pr < strip.row1)
+        p_rows = legendre_table(strip.row0, strip.row1, 10)[pr[inside] - strip.row0]
+        p_cols = legendre_table(strip.col0, strip.col1, 10)[pc[inside] - strip.col0]
+        products = (p_rows[:, :, None] * p_cols[:, None, :]).reshape(p_rows.shape[0], -1)[:, triangle_index(10)]
+        values[inside] = products @ t.T
+    # Exact polynomial identity up to rounding (values are O(1), coefficient sums O(1e2)).
+    np.testing.assert_allclose(values, explicit, atol=1e-11)
+    gram, sums = gram_of(coefficients, strip_moments(mask, strips, 10))
+    np.testing.assert_allclose(gram, explicit.T @ explicit, atol=1e-9 * mask.sum())
+    np.testing.assert_allclose(sums, explicit.sum(axis=0), atol=1e-9 * mask.sum())
