@@ -72,7 +72,8 @@ class MomentProjection:
         self._cols = [legendre_table(s.col0, s.col1, self._degree) for s in self._strips]
         self._outside = [~state.mask[s.row0:s.row1, s.col0:s.col1] for s in self._strips]
         self.n_samples = int(sum(o.size - np.count_nonzero(o) for o in self._outside))
-        self._probe = np.array([_first_pixel(state.mask, s) for s in self._strips], dtype=np.intp)
+        self._probe = np.unravel_index(
+            np.array([_first_pixel(state.mask, s) for s in self._strips], dtype=np.intp), self.shape)
 
     @property
     def nbytes(self) -> int:
@@ -84,7 +85,7 @@ class MomentProjection:
         return self._transform[:, k * self._width:(k + 1) * self._width]
 
     def _shift(self, frame: NDArray) -> float:
-        values = frame.reshape(-1)[self._probe].astype(np.float64)
+        values = frame[self._probe].astype(np.float64)  # no copy of a non-contiguous frame
         finite = values[np.isfinite(values)]
         return float(finite.mean()) if finite.size else 0.0
 
