@@ -34,11 +34,14 @@ from ..aperture import Aperture, Topology, UnsupportedAperture
 from ..formats.limits import format_bytes, memory_budget_bytes
 from ..zernike import default_normalisation, mode_list, normalisation_factor
 from .auto import AUTO, BuildOne, advised_error, build_auto
-from .conditioning import gram_condition, noise_gain, normalised_gram
+from .coefficient_maps import CoefficientMaps, coefficient_maps
+from .legendre_moments import MAX_AMPLIFICATION
+from .moment_build import MOMENT_METHODS, MomentRequest, build_moment_fitter
+from .operator_projection import OperatorProjection
 from .fitter import Fitter
 from .methods import METHODS, MappingOptions, Samples, method_columns
 from .normal_equations import IllConditionedBasis, NormalEquations
-from .orthonormal import factor_quality, orthonormalise
+from .orthonormal import orthonormalise
 from .physical_terms import physical_term_basis, physical_term_names
 from .results import FitBasis, FitterDiagnostics, Pupil
 from .sampling import aperture_of, fit_mask_of, pupil_of, samples_of
@@ -156,6 +159,7 @@ def build_fitter(
     angular_balance: bool = True,
     fallback: str | None = None,
     fit_mask: NDArray | None = None,
+    refit: str = "auto",
 ) -> Fitter:
     """Precompute everything needed to refit frames on one aperture.
 
@@ -207,6 +211,14 @@ def build_fitter(
         outline. Default: the aperture's mask. The aperture still gives the default pupil and
         the domain of a mapped method's map; fitted pixels outside that domain take the map's
         extrapolation from the nearest mesh triangle, clamped into the unit disk.
+    refit : {"auto", "moments", "operator"}
+        How frames are projected on the basis. ``auto``: by separable Legendre moments (one pass
+        over the frame, no N x M operator; :mod:`wavestack.pipeline.fit.moment_projection`) for
+        the polynomial methods ``circle`` and ``qr`` where the moments keep float64 precision
+        (``diagnostics.moment_amplification`` at most 3e4), else by a stored operator (always
+        for the mapped methods, whose columns are not polynomials). ``moments`` insists (raises
+        where precision would be lost), ``operator`` keeps the operator. ``diagnostics.refit``
+        says which was built.
 
     Returns
     -------
@@ -247,15 +259,16 @@ def build_fitter(
         raise ValueError(f"normalisation: expected 'rms' or 'edge', got {normalisation!r}")
     if remove is not None:
         physical_term_names(remove)
+    one_of(refit, "refit", ("auto", "moments", "operator"), voice="expected")
     options = MappingOptions(
         laplacian=laplacian, mesh_vertices=mesh_vertices, angular_balance=bool(angular_balance)
     )
     settings = dict(
         modes=int(modes), ordering=ordering, pupil=pupil, dtype=dtype,
-        normalisation=normalisation, remove=remove, options=options,
+        normalisation=normalisation, remove=remove, options=options, refit=refit,
     )
+    check_basis_size(0, int(modes))  # the mode bound; the operator's memory is checked where one is built
     aperture = aperture_of(aperture_or_mask)
-    check_basis_size(aperture.valid_count, int(modes))
     settings["fit_mask"] = fit_mask_of(fit_mask, aperture)
 
     def build(concrete: str, **overrides: object) -> Fitter:
@@ -298,12 +311,26 @@ def _build(
     remove: str | None,
     options: MappingOptions,
     fit_mask: NDArray[np.bool_] | None,
+    refit: str,
 ) -> Fitter:
     started = time.perf_counter()
     resolved_pupil = pupil_of(aperture, pupil)
+    mode_pairs = mode_list(ordering, modes)
+    if method in MOMENT_METHODS and refit != "operator":
+        output_normalisation, scale = _output_scale(mode_pairs, normalisation, None)
+        basis = _basis_of(method, ordering, output_normalisation, mode_pairs, resolved_pupil, None)
+        fitter = build_moment_fitter(
+            aperture, MomentRequest(method, basis, scale, remove, dtype, pupil is not None, fit_mask), started
+        )
+        if fitter is not None:
+            return fitter
+        if refit == "moments":
+            raise ValueError(f"refit: 'moments' would lose precision on this aperture (coefficient amplification "
+                             f"above {MAX_AMPLIFICATION:g} even on the finest strips); expected refit='auto' or "
+                             "'operator'")
+    check_basis_size(aperture.valid_count, int(modes))
     samples = samples_of(aperture, resolved_pupil, pupil is not None, fit_mask)
     timings = {"aperture": time.perf_counter() - started}
-    mode_pairs = mode_list(ordering, modes)
 
     tick = time.perf_counter()
     columns = method_columns(method, aperture, samples, mode_pairs, options)
@@ -323,25 +350,24 @@ def _build(
         topology=aperture.topology.value,
         valid_pixels=int(samples.x.size),
         excluded_outside_pupil=samples.excluded,
-        gram_condition=factors.kappa,
-        noise_gain=factors.gain,
+        gram_condition=factors.maps.kappa,
+        noise_gain=factors.maps.gain,
         timings=timings,
+        refit="operator",
         **_mapping_diagnostics(columns.mapping),
     )
-    logger.info(
-        "built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
-        method, len(mode_pairs), samples.x.size, factors.kappa, timings["total"],
-    )
+    logger.info("built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
+                method, len(mode_pairs), samples.x.size, factors.maps.kappa, timings["total"])
     return Fitter(
         aperture=aperture,
-        flat_index=samples.flat_index,
-        operator=factors.operator,
+        projection=OperatorProjection(aperture.shape, samples.flat_index, factors.operator),
         equations=factors.equations,
-        coefficient_transform=factors.coefficient_transform,
-        from_coefficients=factors.from_coefficients,
+        coefficient_transform=factors.maps.coefficient_transform,
+        from_coefficients=factors.maps.from_coefficients,
         basis=basis,
         diagnostics=diagnostics,
-        circle_transform=factors.circle_transform,
+        dtype=dtype,
+        circle_transform=factors.maps.circle_transform,
         removal=remove,
         removal_transform=factors.removal_transform,
         mapping=columns.mapping,
@@ -364,16 +390,12 @@ def _output_scale(
 
 @dataclass(frozen=True)
 class _Factors:
-    """The stored operator, the normal equations and the coefficient transforms of a build."""
+    """The stored operator, the normal equations and the coefficient maps of an operator build."""
 
     operator: NDArray[np.floating]
     equations: NormalEquations
-    coefficient_transform: NDArray[np.float64]
-    from_coefficients: NDArray[np.float64]
-    circle_transform: NDArray[np.float64] | None
+    maps: CoefficientMaps
     removal_transform: NDArray[np.float64] | None
-    kappa: float
-    gain: float
 
 
 def _factorise(
@@ -385,43 +407,24 @@ def _factorise(
     dtype: np.dtype,
 ) -> _Factors:
     """Orthonormalise the method's columns (and the removed terms') on the samples (step 3)."""
-    n_modes = len(scale)
     orthonormal, triangular = orthonormalise(values, method)
-    kappa, gain = factor_quality(triangular)
-    to_basis = scale[:, None] * scipy.linalg.solve_triangular(
-        triangular, np.eye(n_modes), lower=False
-    )  # orthonormal coefficients -> the basis' own coefficients, in the output normalisation
     removal_transform = None
     if remove is not None:
         terms = physical_term_basis(samples.x, samples.y, remove)
         terms_orthonormal, terms_triangular = orthonormalise(terms, f"remove={remove}")
-        removal_transform = scipy.linalg.solve_triangular(
-            terms_triangular, np.eye(terms.shape[1]), lower=False
-        )
+        removal_transform = _inverse(terms_triangular)
         orthonormal = np.hstack([orthonormal, terms_orthonormal])
     operator = _stored_operator(orthonormal, dtype)
     equations = NormalEquations(
-        orthonormal.T @ orthonormal, orthonormal.sum(axis=0), n_modes, samples.x.size
+        orthonormal.T @ orthonormal, orthonormal.sum(axis=0), len(scale), samples.x.size
     )
     del orthonormal
-    if method == "qr":
-        coefficient_transform, circle_transform = np.eye(n_modes), to_basis
-        from_coefficients = np.eye(n_modes)
-        own_gram = normalised_gram(equations.gram[:n_modes, :n_modes], samples.x.size)
-        kappa, gain = gram_condition(own_gram), noise_gain(own_gram)
-    else:
-        coefficient_transform, circle_transform = to_basis, None
-        from_coefficients = triangular / scale[None, :]
-    return _Factors(
-        operator=operator,
-        equations=equations,
-        coefficient_transform=coefficient_transform,
-        from_coefficients=from_coefficients,
-        circle_transform=circle_transform,
-        removal_transform=removal_transform,
-        kappa=kappa,
-        gain=gain,
-    )
+    maps = coefficient_maps(method, scale, triangular, equations.gram, samples.x.size)
+    return _Factors(operator, equations, maps, removal_transform)
+
+
+def _inverse(triangular: NDArray[np.float64]) -> NDArray[np.float64]:
+    return scipy.linalg.solve_triangular(triangular, np.eye(triangular.shape[0]), lower=False)
 
 
 def _basis_of(

@@ -1,16 +1,19 @@
-"""A fitter: everything about one aperture precomputed, so a frame costs a gather and a product.
+"""A fitter: everything about one aperture precomputed, so a frame costs one pass and a small solve.
 
 ``build_fitter`` (module :mod:`wavestack.pipeline.fit.build`) does the expensive work once per
 aperture; :class:`Fitter` then refits any frame on that aperture:
 
-1. gather the valid samples ``w`` from the frame (one pass over the frame);
-2. centre them on their mean (keeps float32 sums accurate; the mean returns through the piston);
-3. ``b = A^T w`` with the stored operator ``A``, the basis orthonormalised on the samples
-   (the one pass over the operator);
-4. solve the small normal equations (:mod:`wavestack.pipeline.fit.normal_equations`) and map the
+1. ``b = A^T (w - s)`` and ``|w - s|^2`` over the fitted samples, by one of two projections
+   (:mod:`wavestack.pipeline.fit.projection`): separable Legendre moments of the frame for the
+   polynomial bases (one pass over the frame, no operator), or a stored operator ``A`` (the
+   mapped bases); ``A`` is the basis orthonormalised on the samples, plus the removed physical
+   terms;
+2. the constant ``s`` moved to the samples' mean (keeps the sums accurate; the mean returns
+   through the piston);
+3. solve the small normal equations (:mod:`wavestack.pipeline.fit.normal_equations`) and map the
    orthonormal coefficients to the method's own with an M x M matrix.
 
-The residual RMS comes from the normal-equation identity, so steps 1-4 are the whole per-frame
+The residual RMS comes from the normal-equation identity, so steps 1-3 are the whole per-frame
 cost. The residual map and its peak-to-valley take one more pass and are computed on request.
 """
 
@@ -18,24 +21,29 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Union
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..aperture import Aperture
+from .moment_projection import MomentProjection
 from .normal_equations import NormalEquations, SolvedFrame
+from .operator_projection import OperatorProjection
 from .physical_terms import terms_from_vector
-from .results import FitBasis, FitResult, FitterDiagnostics, InvalidFrame, NanPolicy
+from .projection import Projected
+from .results import FitBasis, FitResult, FitterDiagnostics, NanPolicy
 
 if TYPE_CHECKING:  # only for annotations: the fitter does not need the map's modules
     from ..mapping import CanonicalMap
 
 logger = logging.getLogger(__name__)
 
+Projection = Union[MomentProjection, OperatorProjection]
+
 
 class Fitter:
-    """Refits frames on one aperture from a precomputed operator and factorisation.
+    """Refits frames on one aperture from a precomputed projection and factorisation.
 
     Built by :func:`wavestack.pipeline.build_fitter`; not meant to be constructed by hand.
 
@@ -43,13 +51,12 @@ class Fitter:
     ----------
     aperture : Aperture
         The aperture the fitter was built for.
-    flat_index : ndarray of intp, shape (N,)
-        Row-major indices of the fitted samples in a frame.
-    operator : ndarray, shape (N, M + k)
-        The basis columns orthonormalised on the samples (unit RMS), followed by the
-        orthonormalised physical-term columns, in the fit dtype.
+    projection : MomentProjection or OperatorProjection
+        How ``A^T w`` is made from a frame (:mod:`wavestack.pipeline.fit.projection`); ``A`` is
+        the basis columns orthonormalised on the samples (unit RMS), followed by the
+        orthonormalised physical-term columns.
     equations : NormalEquations
-        The factorised normal equations of ``operator``.
+        The factorised normal equations of ``A``.
     coefficient_transform : ndarray, shape (M, M)
         Maps solved (orthonormal) coefficients to ``FitResult.coefficients``.
     from_coefficients : ndarray, shape (M, M)
@@ -58,6 +65,8 @@ class Fitter:
         What the coefficients mean.
     diagnostics : FitterDiagnostics
         Sampling quality and build timings.
+    dtype : numpy dtype
+        The fit dtype asked for (the operator's; the moment path always sums in float64).
     circle_transform : ndarray, shape (M, M), optional
         Maps solved coefficients to circle-polynomial coefficients (``qr`` only).
     removal : str, optional
@@ -72,13 +81,13 @@ class Fitter:
         self,
         *,
         aperture: Aperture,
-        flat_index: NDArray[np.intp],
-        operator: NDArray[np.floating],
+        projection: Projection,
         equations: NormalEquations,
         coefficient_transform: NDArray[np.float64],
         from_coefficients: NDArray[np.float64],
         basis: FitBasis,
         diagnostics: FitterDiagnostics,
+        dtype: np.dtype,
         circle_transform: NDArray[np.float64] | None = None,
         removal: str | None = None,
         removal_transform: NDArray[np.float64] | None = None,
@@ -89,8 +98,8 @@ class Fitter:
         self.diagnostics = diagnostics
         self.removal = removal
         self.mapping = mapping
-        self._flat_index = flat_index
-        self._operator = operator
+        self._projection = projection
+        self._dtype = np.dtype(dtype)
         self._equations = equations
         self._coefficient_transform = coefficient_transform
         self._from_coefficients = from_coefficients
@@ -99,8 +108,8 @@ class Fitter:
 
     @property
     def dtype(self) -> np.dtype:
-        """Floating-point type of the stored operator and of the per-frame product."""
-        return self._operator.dtype
+        """The fit dtype: the stored operator's (the moment path sums in float64 whatever it is)."""
+        return self._dtype
 
     @property
     def n_modes(self) -> int:
@@ -108,22 +117,37 @@ class Fitter:
         return len(self.basis.modes)
 
     @property
+    def refit(self) -> str:
+        """How a frame is projected: ``"moments"`` (no operator) or ``"operator"``."""
+        return "moments" if isinstance(self._projection, MomentProjection) else "operator"
+
+    @property
     def operator(self) -> NDArray[np.floating]:
-        """The stored operator ``[H | E]``, shape (N, M + k), read-only (the bytes a refit reads)."""
-        view = self._operator.view()
+        """The stored operator ``[H | E]``, shape (N, M + k), read-only (the bytes a refit reads).
+
+        Raises
+        ------
+        AttributeError
+            For a fitter that refits by moments: it keeps no operator (build it with
+            ``refit="operator"`` to have one).
+        """
+        if not isinstance(self._projection, OperatorProjection):
+            raise AttributeError("operator: this fitter refits by separable moments and keeps no operator; "
+                                 "build it with refit='operator' to have one")
+        view = self._projection.operator.view()
         view.flags.writeable = False
         return view
 
     @property
     def operator_nbytes(self) -> int:
-        """Bytes of the operator read once per frame."""
-        return int(self._operator.nbytes)
+        """Bytes of the stored arrays read once per frame besides the frame (operator or tables)."""
+        return self._projection.nbytes
 
     def __repr__(self) -> str:
         return (
             f"Fitter(method={self.basis.method!r}, modes={self.n_modes}, "
-            f"ordering={self.basis.ordering!r}, samples={self._flat_index.size}, "
-            f"dtype={self.dtype.name})"
+            f"ordering={self.basis.ordering!r}, samples={self._projection.n_samples}, "
+            f"dtype={self.dtype.name}, refit={self.refit!r})"
         )
 
     def fit(
@@ -145,8 +169,7 @@ class Fitter:
             :class:`InvalidFrame`, or fit without them (a rank-k downdate of the normal
             equations, reported as ``FitResult.nan_count``).
         residual : bool
-            Also compute the residual map and its peak-to-valley (one more pass over the
-            operator).
+            Also compute the residual map and its peak-to-valley (one more pass).
 
         Returns
         -------
@@ -156,24 +179,71 @@ class Fitter:
         ------
         InvalidFrame
             If the frame's shape differs from the aperture's, or it has non-finite samples
-            inside the aperture with ``nan_policy="raise"``, or no finite sample at all.
+            inside the aperture with ``nan_policy="raise"``, or too few finite samples.
         """
-        samples = self._gather(frame)
-        equations, bad = self._equations, None
-        mean = float(samples.mean())
-        if not np.isfinite(mean):
-            bad = np.flatnonzero(~np.isfinite(samples))
-            equations = self._equations_without(bad, nan_policy)
-            samples[bad] = 0.0
-            mean = float(samples.sum()) / equations.n_samples
-        if not equations.constant_in_span:
-            mean = 0.0  # centring is only exact when the basis holds a constant
-        if bad is not None:
-            samples[bad] = mean  # zero once centred: the dropped samples add nothing below
-        samples -= samples.dtype.type(mean)
-        product = (samples @ self._operator).astype(np.float64)
-        solved = equations.solve(product, float(np.dot(samples, samples)), mean)
-        return self._result(solved, samples, mean, bad, equations.n_samples, residual)
+        if nan_policy not in ("raise", "omit"):
+            raise ValueError(f"nan_policy: expected 'raise' or 'omit', got {nan_policy!r}")
+        projected = self._projection.project(frame, nan_policy)
+        return self._finish(frame, projected, residual)
+
+    def fit_many(
+        self,
+        frames: NDArray[np.floating],
+        *,
+        nan_policy: NanPolicy = "raise",
+        residual: bool = False,
+    ) -> list[FitResult]:
+        """Fit a stack of frames: the same results as :meth:`fit` on each, in one product per block.
+
+        Parameters
+        ----------
+        frames : ndarray, shape (K, rows, cols)
+            The maps, stacked.
+        nan_policy, residual
+            As for :meth:`fit`; a frame with non-finite samples inside the aperture is fitted
+            on its own under ``nan_policy``.
+
+        Returns
+        -------
+        list of FitResult, length K
+
+        Raises
+        ------
+        InvalidFrame
+            If the stack's shape is not (K, rows, cols) of the aperture, or as :meth:`fit`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from wavestack.pipeline import build_fitter
+        >>> rows, cols = np.mgrid[:48, :48]
+        >>> fitter = build_fitter((rows - 23.5) ** 2 + (cols - 23.5) ** 2 < 22**2, modes=10, dtype=np.float64)
+        >>> truth = np.eye(10)[:3] * 0.1
+        >>> frames = np.stack([np.nan_to_num(fitter.surface(t)) for t in truth])
+        >>> results = fitter.fit_many(frames)
+        >>> [round(float(r.coefficients[i]), 9) for i, r in enumerate(results)]
+        [0.1, 0.1, 0.1]
+        """
+        if nan_policy not in ("raise", "omit"):
+            raise ValueError(f"nan_policy: expected 'raise' or 'omit', got {nan_policy!r}")
+        projected = self._projection.project_many(frames, keep_samples=residual)
+        frames = np.asarray(frames)
+        return [self.fit(frames[i], nan_policy=nan_policy, residual=residual) if p is None
+                else self._finish(frames[i], p, residual) for i, p in enumerate(projected)]
+
+    def _finish(self, frame: NDArray, projected: Projected, residual: bool) -> FitResult:
+        """Solve the normal equations of a projected frame and make its result."""
+        equations = self._equations
+        if projected.downdate is not None:
+            equations = equations.without(projected.downdate)
+        n_valid = equations.n_samples
+        mean = projected.shift + projected.total / n_valid
+        centre = mean if equations.constant_in_span else 0.0  # centring is exact only with a constant
+        step = centre - projected.shift
+        product = projected.product - step * equations.column_sums
+        squares = projected.squares - 2.0 * step * projected.total + n_valid * step * step
+        solved = equations.solve(product, squares, centre)
+        return self._result(solved, frame, projected, n_valid, residual)
 
     def surface(self, coefficients: NDArray[np.floating]) -> NDArray[np.float64]:
         """Reconstruct the map a coefficient vector describes on this aperture.
@@ -194,8 +264,9 @@ class Fitter:
         ValueError
             If the vector has the wrong length.
         """
-        values = self._operator[:, : self.n_modes] @ (self._from_coefficients @ self._checked(coefficients))
-        return self._scatter(values)
+        terms = np.zeros(self._projection.n_columns)
+        terms[: self.n_modes] = self._from_coefficients @ self._checked(coefficients)
+        return self._projection.evaluate(terms)
 
     def surface_rms(self, coefficients: NDArray[np.floating]) -> float:
         """RMS over the fitted samples of the surface a coefficient vector describes.
@@ -229,15 +300,12 @@ class Fitter:
     def export_state(self) -> dict[str, object]:
         """Everything the per-frame path needs, as arrays and JSON-ready values.
 
-        Used by :mod:`wavestack.pipeline.fit.store`; the operator is given in its storage
-        order (``operator_mode_major`` says whether it is the transposed (M, N) array).
+        Used by :mod:`wavestack.pipeline.fit.store`. An operator fitter gives its operator in its
+        storage order (``operator_mode_major`` says whether it is the transposed (M, N) array) and
+        its sample indices; a moment fitter gives its fitted-pixel mask, strips and coefficients.
         """
-        mode_major = not self._operator.flags.c_contiguous
         basis = dataclasses.asdict(self.basis)
-        return {
-            "flat_index": self._flat_index,
-            "operator": self._operator.T if mode_major else self._operator,
-            "operator_mode_major": np.array(mode_major),
+        state: dict[str, object] = {
             "gram": self._equations.gram,
             "column_sums": self._equations.column_sums,
             "n_basis": np.array(self._equations.n_basis),
@@ -247,47 +315,29 @@ class Fitter:
             "circle_transform": self._circle_transform,
             "removal_transform": self._removal_transform,
             "removal": self.removal,
+            "dtype": self.dtype.name,
             "basis": basis,
             "diagnostics": self.diagnostics.as_dict(),
         }
+        projection = self._projection
+        if isinstance(projection, MomentProjection):
+            moments = projection.state
+            state.update(moment_mask_bits=np.packbits(moments.mask), moment_strips=moments.strips,
+                         moment_degree=np.array(moments.degree), moment_transform=moments.transform)
+        else:
+            mode_major = not projection.operator.flags.c_contiguous
+            state.update(flat_index=projection.flat_index,
+                         operator=projection.operator.T if mode_major else projection.operator,
+                         operator_mode_major=np.array(mode_major))
+        return state
 
     # -- per-frame helpers ------------------------------------------------------------------
-
-    def _gather(self, frame: NDArray[np.floating]) -> NDArray[np.floating]:
-        frame = np.asarray(frame)
-        if frame.shape != self.aperture.shape:
-            raise InvalidFrame(
-                f"frame: expected shape {self.aperture.shape} like the fitter's aperture, "
-                f"got {frame.shape}"
-            )
-        if not (np.issubdtype(frame.dtype, np.floating) or np.issubdtype(frame.dtype, np.integer)):
-            raise InvalidFrame(f"frame: expected a real-valued array, got dtype {frame.dtype}")
-        samples = np.take(frame.reshape(-1), self._flat_index)
-        return samples.astype(self.dtype, copy=False)
-
-    def _equations_without(self, bad: NDArray[np.intp], nan_policy: NanPolicy) -> NormalEquations:
-        total = self._flat_index.size
-        if nan_policy not in ("raise", "omit"):
-            raise ValueError(f"nan_policy: expected 'raise' or 'omit', got {nan_policy!r}")
-        if nan_policy == "raise":
-            raise InvalidFrame(
-                f"frame: {bad.size} of {total} samples inside the aperture are NaN or infinite; "
-                "expected finite values (use nan_policy='omit' to fit without them)"
-            )
-        if total - bad.size <= self._operator.shape[1]:
-            raise InvalidFrame(
-                f"frame: only {total - bad.size} finite samples inside the aperture; expected "
-                f"more than the {self._operator.shape[1]} fitted terms"
-            )
-        logger.debug("omitting %d non-finite samples by downdating the normal equations", bad.size)
-        return self._equations.without_rows(self._operator[bad].astype(np.float64))
 
     def _result(
         self,
         solved: SolvedFrame,
-        centred: NDArray[np.floating],
-        mean: float,
-        bad: NDArray[np.intp] | None,
+        frame: NDArray,
+        projected: Projected,
         n_valid: int,
         residual: bool,
     ) -> FitResult:
@@ -305,39 +355,16 @@ class Fitter:
             )
         residual_pv = residual_map = None
         if residual:
-            residual_map, residual_pv = self._residual(solved, centred, mean, bad)
+            terms = np.concatenate([solved.basis, solved.removed])
+            residual_map, residual_pv = self._projection.residual(frame, projected, terms)
         return FitResult(
             coefficients=self._coefficient_transform @ solved.basis,
             residual_rms=float(np.sqrt(solved.residual_sq / n_valid)),
             valid_count=n_valid,
-            nan_count=0 if bad is None else int(bad.size),
+            nan_count=0 if projected.downdate is None else projected.downdate.count,
             basis=self.basis,
             residual_pv=residual_pv,
             residual_map=residual_map,
             circle_coefficients=circle,
             removed=removed,
         )
-
-    def _residual(
-        self,
-        solved: SolvedFrame,
-        centred: NDArray[np.floating],
-        mean: float,
-        bad: NDArray[np.intp] | None,
-    ) -> tuple[NDArray[np.float64], float]:
-        # The terms in the operator's own type: a float64 vector against a float32 operator would
-        # make numpy copy the whole operator to float64 on every call (7x the cost of the pass).
-        # The residual is then as exact as the operator (float32: ~1e-7 relative to the map).
-        terms = np.concatenate([solved.basis, solved.removed]).astype(self._operator.dtype)
-        centred_residual = centred - self._operator @ terms  # the mean cancels in the peak-to-valley
-        if bad is not None:
-            centred_residual[bad] = np.nan
-            peak_to_valley = float(np.nanmax(centred_residual)) - float(np.nanmin(centred_residual))
-        else:
-            peak_to_valley = float(centred_residual.max()) - float(centred_residual.min())
-        return self._scatter(centred_residual.astype(np.float64) + mean), peak_to_valley
-
-    def _scatter(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
-        full = np.full(self.aperture.shape, np.nan)
-        full.reshape(-1)[self._flat_index] = values
-        return full

@@ -18,10 +18,14 @@ Samples that turn out to be NaN in a frame are dropped by a rank-k downdate of t
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from .projection import Downdate
 
 
 class IllConditionedBasis(ValueError):
@@ -160,6 +164,25 @@ class NormalEquations:
         basis = scipy.linalg.cho_solve(self._basis_factor, b_basis, check_finite=False)
         residual_sq = max(ww - float(basis @ b_basis), 0.0)
         return SolvedFrame(basis=basis, removed=removed, residual_sq=residual_sq)
+
+    def without(self, dropped: Downdate) -> NormalEquations:
+        """Normal equations with some samples removed, given their share (a rank-k downdate).
+
+        Parameters
+        ----------
+        dropped : Downdate
+            ``A_k^T A_k``, ``A_k^T 1`` and the count of the samples to drop.
+
+        Returns
+        -------
+        NormalEquations
+        """
+        return NormalEquations(
+            self.gram - dropped.gram,
+            self.column_sums - dropped.column_sums,
+            self.n_basis,
+            self.n_samples - dropped.count,
+        )
 
     def without_rows(self, rows: NDArray[np.float64]) -> NormalEquations:
         """Normal equations with some samples removed (rank-k downdate).

@@ -112,17 +112,41 @@ def orthonormalise(
     q = columns
     r_total = np.eye(columns.shape[1])
     for _ in range(2):
-        try:
-            r = scipy.linalg.cholesky(q.T @ q / n, lower=False)
-        except np.linalg.LinAlgError:
-            r = None
-        if r is None or not np.isfinite(r).all():
-            raise IllConditionedBasis(
-                f"{what}: the {columns.shape[1]} columns are linearly dependent on these "
-                f"{n} samples; expected fewer modes or a larger aperture"
-            )
+        r = cholesky_factor(q.T @ q / n, what, n)
         q = q @ scipy.linalg.solve_triangular(r, np.eye(r.shape[0]), lower=False)
         r_total = r @ r_total
+    check_condition(r_total, what, n)
+    return q, r_total
+
+
+def cholesky_factor(gram: NDArray[np.float64], what: str, n: int) -> NDArray[np.float64]:
+    """Upper Cholesky factor of ``gram`` (M x M, normalised by the N samples), or the error.
+
+    Raises
+    ------
+    IllConditionedBasis
+        If the columns are linearly dependent on the samples to working precision.
+    """
+    try:
+        r = scipy.linalg.cholesky(gram, lower=False)
+    except np.linalg.LinAlgError:
+        r = None
+    if r is None or not np.isfinite(r).all():
+        raise IllConditionedBasis(
+            f"{what}: the {gram.shape[0]} columns are linearly dependent on these "
+            f"{n} samples; expected fewer modes or a larger aperture"
+        )
+    return r
+
+
+def check_condition(r_total: NDArray[np.float64], what: str, n: int) -> None:
+    """Refuse a factor whose kappa(G) exceeds :data:`MAX_GRAM_CONDITION`.
+
+    Raises
+    ------
+    IllConditionedBasis
+        Naming kappa(G), the limit and the usable mode count.
+    """
     singular = np.linalg.svd(r_total, compute_uv=False)
     kappa = float((singular[0] / singular[-1]) ** 2)
     if not kappa <= MAX_GRAM_CONDITION:
@@ -132,7 +156,6 @@ def orthonormalise(
             f"{MAX_GRAM_CONDITION:.17g} (1/eps = 2**52): these modes are numerically degenerate here",
             usable_modes=usable_mode_count(r_total),
         )
-    return q, r_total
 
 
 def factor_quality(triangular: NDArray[np.float64]) -> tuple[float, float]:

@@ -119,6 +119,14 @@ class FitterDiagnostics:
     method_reason : str or None
         With ``method="auto"``: why ``method`` was chosen (the figure compared and its limit);
         None for a method asked for by name.
+    refit : str
+        How frames are projected: ``"moments"`` (separable Legendre moments, no operator) or
+        ``"operator"`` (a stored N x M operator).
+    moment_strips : int or None
+        Moments only: strips the fitted pixels were cut into.
+    moment_amplification : float or None
+        Moments only: the largest coefficient row sum, the factor by which float64 rounding of
+        the moments reaches the coefficients (relative error about this times 1.1e-16).
     """
 
     method: str
@@ -138,6 +146,9 @@ class FitterDiagnostics:
     mesh_vertices: int | None = None
     fallback: str | None = None
     method_reason: str | None = None
+    refit: str = "operator"
+    moment_strips: int | None = None
+    moment_amplification: float | None = None
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready form (the CLI's names)."""

@@ -22,12 +22,16 @@ from numpy.typing import NDArray
 from ..aperture import Aperture
 from .build import build_fitter
 from .fitter import Fitter
+from .moment_projection import MomentProjection, MomentState
+from .operator_projection import OperatorProjection
 from .normal_equations import NormalEquations
 from .results import FitBasis, FitterDiagnostics, Pupil
 
 logger = logging.getLogger(__name__)
 
-FORMAT_VERSION = 1
+# 2: moment fitters (no operator; the fitted-pixel mask, strips and coefficients instead), and the
+# fit dtype recorded. Files of format 1 are rebuilt by the store (their key names the version).
+FORMAT_VERSION = 2
 
 
 def fitter_key(mask: NDArray, settings: Mapping[str, Any]) -> str:
@@ -76,6 +80,7 @@ def save_fitter(fitter: Fitter, path: str | Path) -> None:
         "basis": {**basis, "pupil": basis["pupil"]},
         "diagnostics": diagnostics,
         "removal": state.pop("removal"),
+        "dtype": state.pop("dtype"),
         "min_hole_area_px": fitter.aperture.min_hole_area_px,
         "mask_shape": list(fitter.aperture.shape),
     }
@@ -108,13 +113,9 @@ def load_fitter(path: str | Path) -> Fitter:
     basis = dict(meta["basis"])
     basis["pupil"] = Pupil(**basis["pupil"])
     basis["modes"] = tuple(tuple(mode) for mode in basis["modes"])
-    operator = arrays.pop("operator")
-    if arrays.pop("operator_mode_major")[()]:
-        operator = operator.T
     return Fitter(
         aperture=aperture,
-        flat_index=arrays.pop("flat_index").astype(np.intp),
-        operator=operator,
+        projection=_projection(arrays, shape),
         equations=NormalEquations(
             arrays.pop("gram"), arrays.pop("column_sums"),
             int(arrays.pop("n_basis")), int(arrays.pop("n_samples")),
@@ -123,10 +124,24 @@ def load_fitter(path: str | Path) -> Fitter:
         from_coefficients=arrays.pop("from_coefficients"),
         basis=FitBasis(**basis),
         diagnostics=FitterDiagnostics(**meta["diagnostics"]),
+        dtype=np.dtype(meta["dtype"]),
         circle_transform=arrays.pop("circle_transform", None),
         removal=meta["removal"],
         removal_transform=arrays.pop("removal_transform", None),
     )
+
+
+def _projection(arrays: dict[str, NDArray], shape: tuple[int, ...]) -> MomentProjection | OperatorProjection:
+    """The stored projection: a moment fitter's mask, strips and coefficients, or the operator."""
+    if "moment_transform" in arrays:
+        bits = arrays.pop("moment_mask_bits")
+        mask = np.unpackbits(bits, count=shape[0] * shape[1]).reshape(shape).astype(bool)
+        return MomentProjection(MomentState(mask, arrays.pop("moment_strips").astype(np.int64),
+                                            int(arrays.pop("moment_degree")), arrays.pop("moment_transform")))
+    operator = arrays.pop("operator")
+    if arrays.pop("operator_mode_major")[()]:
+        operator = operator.T
+    return OperatorProjection((int(shape[0]), int(shape[1])), arrays.pop("flat_index").astype(np.intp), operator)
 
 
 class FitterStore:

@@ -1,0 +1,224 @@
+"""The refit of a polynomial basis by separable Legendre moments: one pass over the frame.
+
+For each strip of the fitted pixels (:mod:`wavestack.pipeline.fit.legendre_moments`) the frame
+is read in row chunks that stay in cache: each chunk is moved to float64 less a shift, zeroed
+outside the fitted pixels, squared into ``|w|^2`` and multiplied by the strip's Legendre table
+(``P_v^T W``, a (D + 1)-row product); one more (D + 1)-wide product per strip gives the moments,
+and one (K x S L) product all of ``A^T w``. Nothing of size N x M exists.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .legendre_moments import Strip, legendre_table, strip_moments, gram_of, triangle_index
+from .projection import Downdate, Projected, check_frame, check_frames, refuse_nonfinite
+from .results import NanPolicy
+
+logger = logging.getLogger(__name__)
+
+# Float64 bytes of one chunk of a strip: small enough to stay in a 2 MB L2 cache with its source.
+_CHUNK_BYTES = 1024 * 1024
+# Float64 bytes of the stacked chunk of a batched refit.
+_BATCH_BYTES = 8 * 1024 * 1024
+# Dropped samples above which their share of the Gram matrix comes from mask moments, not rows.
+_ROWS_DOWNDATE_MAX = 2048
+
+
+@dataclass(frozen=True)
+class MomentState:
+    """The stored form of a moment projection (what :mod:`~wavestack.pipeline.fit.store` saves).
+
+    Attributes
+    ----------
+    mask : ndarray of bool, shape (rows, cols)
+        The fitted pixels.
+    strips : ndarray of int, shape (S, 4)
+        ``row0, row1, col0, col1`` of each strip.
+    degree : int
+        D, the largest total degree of the columns.
+    transform : ndarray, shape (K, S * L)
+        Coefficients of the K columns in each strip's Legendre products (L = (D+1)(D+2)/2).
+    """
+
+    mask: NDArray[np.bool_]
+    strips: NDArray[np.int64]
+    degree: int
+    transform: NDArray[np.float64]
+
+
+class MomentProjection:
+    """``A^T (w - s)`` from the moments of the frame, for columns that are polynomials.
+
+    Parameters
+    ----------
+    state : MomentState
+    """
+
+    def __init__(self, state: MomentState) -> None:
+        self.state = state
+        self.shape = (int(state.mask.shape[0]), int(state.mask.shape[1]))
+        self._strips = [Strip(*map(int, row)) for row in state.strips]
+        self._degree = int(state.degree)
+        self._index = triangle_index(self._degree)
+        self._transform = state.transform
+        self._width = self._index.size
+        self.n_columns = int(state.transform.shape[0])
+        self._rows = [legendre_table(s.row0, s.row1, self._degree) for s in self._strips]
+        self._cols = [legendre_table(s.col0, s.col1, self._degree) for s in self._strips]
+        self._outside = [~state.mask[s.row0:s.row1, s.col0:s.col1] for s in self._strips]
+        self.n_samples = int(sum(o.size - np.count_nonzero(o) for o in self._outside))
+        self._probe = np.unravel_index(
+            np.array([_first_pixel(state.mask, s) for s in self._strips], dtype=np.intp), self.shape)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the tables read once per frame besides the frame."""
+        tables = sum(r.nbytes + c.nbytes + o.nbytes for r, c, o in zip(self._rows, self._cols, self._outside))
+        return int(self._transform.nbytes + tables)
+
+    def _strip_transform(self, k: int) -> NDArray[np.float64]:
+        return self._transform[:, k * self._width:(k + 1) * self._width]
+
+    def _shift(self, frame: NDArray) -> float:
+        values = frame[self._probe].astype(np.float64)  # no copy of a non-contiguous frame
+        finite = values[np.isfinite(values)]
+        return float(finite.mean()) if finite.size else 0.0
+
+    def project(self, frame: NDArray, nan_policy: NanPolicy) -> Projected:
+        """Moments of one frame (see :class:`~wavestack.pipeline.fit.projection.Projected`)."""
+        frame = check_frame(frame, self.shape)
+        shift = self._shift(frame)
+        with np.errstate(invalid="ignore", over="ignore"):  # non-finite samples are found below
+            moments, squares = self._moments(frame, shift, self._outside)
+        if np.isfinite(squares) and np.isfinite(moments).all():
+            return self._projected(moments, squares, shift, None)
+        bad = [~o & ~np.isfinite(frame[s.row0:s.row1, s.col0:s.col1]) for s, o in zip(self._strips, self._outside)]
+        count = int(sum(np.count_nonzero(b) for b in bad))
+        if count == 0:  # finite samples whose squares overflow: nothing to leave out
+            return self._projected(moments, squares, shift, None)
+        refuse_nonfinite(count, self.n_samples, self.n_columns, nan_policy)
+        logger.debug("omitting %d non-finite samples by downdating the normal equations", count)
+        moments, squares = self._moments(frame, shift, [o | b for o, b in zip(self._outside, bad)])
+        return self._projected(moments, squares, shift, self._downdate(bad, count))
+
+    def _projected(self, moments: NDArray, squares: float, shift: float, downdate: Downdate | None) -> Projected:
+        vector = moments.reshape(len(self._strips), -1)[:, self._index].reshape(-1)
+        total = float(moments[:, 0, 0].sum())  # P_0 = 1: the (0, 0) moment is the plain sum
+        return Projected(self._transform @ vector, float(squares), total, shift, downdate)
+
+    def _moments(self, frame: NDArray, shift: float, outside: list[NDArray[np.bool_]]) -> tuple[NDArray, float]:
+        size = self._degree + 1
+        moments = np.empty((len(self._strips), size, size))
+        squares = 0.0
+        widest = max(s.col1 - s.col0 for s in self._strips)
+        chunk = max(1, _CHUNK_BYTES // (8 * widest))
+        work = np.empty(chunk * widest)
+        for k, (strip, rows, cols, out) in enumerate(zip(self._strips, self._rows, self._cols, outside)):
+            partial = np.zeros((size, strip.col1 - strip.col0))
+            for start in range(strip.row0, strip.row1, chunk):
+                stop = min(start + chunk, strip.row1)
+                buffer = work[: (stop - start) * (strip.col1 - strip.col0)].reshape(stop - start, -1)
+                np.subtract(frame[start:stop, strip.col0:strip.col1], shift, out=buffer, dtype=np.float64)
+                np.copyto(buffer, 0.0, where=out[start - strip.row0:stop - strip.row0])
+                flat = buffer.reshape(-1)
+                squares += float(np.dot(flat, flat))
+                partial += rows[start - strip.row0:stop - strip.row0].T @ buffer
+            moments[k] = partial @ cols
+        return moments, squares
+
+    def project_many(self, frames: NDArray, keep_samples: bool = False) -> list[Projected | None]:
+        """Moments of a stack of frames, one product per chunk of rows for the whole stack.
+
+        Frames with a non-finite sample inside the aperture come back as None (the caller fits
+        them one by one, with its NaN policy). ``keep_samples`` is accepted for the interface's
+        sake: a moment residual reads the frame again.
+        """
+        frames = check_frames(frames, self.shape)
+        with np.errstate(invalid="ignore", over="ignore"):  # frames with non-finite samples come back None
+            return self._project_many(frames)
+
+    def _project_many(self, frames: NDArray) -> list[Projected | None]:
+        count = frames.shape[0]
+        shifts = np.array([self._shift(frame) for frame in frames])
+        size = self._degree + 1
+        moments = np.empty((count, len(self._strips), size, size))
+        squares = np.zeros(count)
+        widest = max(s.col1 - s.col0 for s in self._strips)
+        chunk = max(1, _BATCH_BYTES // (8 * widest * count))
+        for k, (strip, rows, cols, out) in enumerate(zip(self._strips, self._rows, self._cols, self._outside)):
+            width = strip.col1 - strip.col0
+            partial = np.zeros((size, count * width))
+            for start in range(strip.row0, strip.row1, chunk):
+                stop = min(start + chunk, strip.row1)
+                block = np.subtract(frames[:, start:stop, strip.col0:strip.col1], shifts[:, None, None],
+                                    dtype=np.float64)
+                np.copyto(block, 0.0, where=out[None, start - strip.row0:stop - strip.row0])
+                squares += np.einsum("kij,kij->k", block, block)
+                stacked = np.ascontiguousarray(block.transpose(1, 0, 2)).reshape(stop - start, -1)
+                partial += rows[start - strip.row0:stop - strip.row0].T @ stacked
+            per_frame = partial.reshape(size, count, width).transpose(1, 0, 2) @ cols  # (K, D+1, D+1)
+            moments[:, k] = per_frame
+        vectors = moments.reshape(count, len(self._strips), -1)[:, :, self._index].reshape(count, -1)
+        products = vectors @ self._transform.T  # (K frames, columns): one product for the stack
+        totals = moments[:, :, 0, 0].sum(axis=1)
+        results: list[Projected | None] = []
+        for i in range(count):
+            finite = np.isfinite(squares[i]) and np.isfinite(products[i]).all()
+            results.append(Projected(products[i], float(squares[i]), float(totals[i]), float(shifts[i]))
+                           if finite else None)
+        return results
+
+    def _downdate(self, bad: list[NDArray[np.bool_]], count: int) -> Downdate:
+        """The dropped samples' share of ``A^T A`` and ``A^T 1``: from their rows, or for many
+        from the moments of their mask."""
+        if count > _ROWS_DOWNDATE_MAX:
+            mask = np.zeros(self.shape, dtype=bool)
+            for strip, b in zip(self._strips, bad):
+                mask[strip.row0:strip.row1, strip.col0:strip.col1] = b
+            moments = strip_moments(mask, self._strips, self._degree)
+            gram, sums = gram_of([self._strip_transform(k) for k in range(len(self._strips))], moments)
+            return Downdate(gram, sums, count)
+        gram = np.zeros((self.n_columns, self.n_columns))
+        sums = np.zeros(self.n_columns)
+        for k, b in enumerate(bad):
+            rows, cols = np.nonzero(b)
+            if rows.size == 0:
+                continue
+            products = (self._rows[k][rows][:, :, None] * self._cols[k][cols][:, None, :]).reshape(rows.size, -1)
+            values = products[:, self._index] @ self._strip_transform(k).T
+            gram += values.T @ values
+            sums += values.sum(axis=0)
+        return Downdate(gram, sums, count)
+
+    def evaluate(self, terms: NDArray[np.float64], mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
+        """``A @ terms`` on the fitted pixels (or on ``mask``), NaN elsewhere; shape (rows, cols)."""
+        size = self._degree + 1
+        full = np.full(self.shape, np.nan)
+        for k, (strip, rows, cols, out) in enumerate(zip(self._strips, self._rows, self._cols, self._outside)):
+            square = np.zeros(size * size)
+            square[self._index] = self._strip_transform(k).T @ terms
+            values = rows @ square.reshape(size, size) @ cols.T
+            keep = ~out if mask is None else mask[strip.row0:strip.row1, strip.col0:strip.col1]
+            full[strip.row0:strip.row1, strip.col0:strip.col1][keep] = values[keep]
+        return full
+
+    def residual(self, frame: NDArray, projected: Projected, terms: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], float]:
+        """The residual map ``w - A @ terms`` (NaN off the fitted or finite samples) and its PV."""
+        residual = self.evaluate(terms)  # NaN off the fitted pixels, which the subtraction keeps
+        np.subtract(frame, residual, out=residual)
+        residual[~np.isfinite(residual)] = np.nan
+        peak_to_valley = float(np.nanmax(residual)) - float(np.nanmin(residual))
+        return residual, peak_to_valley
+
+
+def _first_pixel(mask: NDArray[np.bool_], strip: Strip) -> int:
+    """Flat index of the strip's first fitted pixel (its sample for the shift)."""
+    box = mask[strip.row0:strip.row1, strip.col0:strip.col1]
+    row, col = np.unravel_index(int(np.argmax(box)), box.shape)
+    return (strip.row0 + int(row)) * mask.shape[1] + strip.col0 + int(col)
