@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from wavestack.batch.plan import Task
 from wavestack.batch.rows import STAGES, ResultRow, SkippedItem, TaskOutcome, station_row
 from wavestack.config import ProcessingSettings, parse_station_config
-from wavestack.pipeline import FitResult, InputError, build_fitter
+from wavestack.pipeline import FitResult, Fitter, InputError, build_fitter
 from wavestack.recording import RecordingDamaged, RecordingReader, recorded_config, replay
 from wavestack.recording.hdf5_open import open_hdf5_readonly
 from wavestack.recording.replay import SkippedSet
@@ -28,8 +28,8 @@ from wavestack.recording.replay import SkippedSet
 logger = logging.getLogger(__name__)
 
 
-def fit_block(fitter: Any, frames: NDArray[np.floating], **kwargs: Any) -> list[FitResult]:
-    """Fit a stack of maps that share the fitter's aperture: ``fitter.fit_many`` where it exists.
+def fit_block(fitter: Fitter, frames: NDArray[np.floating], **kwargs: Any) -> list[FitResult]:
+    """Fit a stack of maps that share the fitter's aperture in one batched refit (``Fitter.fit_many``).
 
     Parameters
     ----------
@@ -51,10 +51,7 @@ def fit_block(fitter: Any, frames: NDArray[np.floating], **kwargs: Any) -> list[
     >>> [len(r.coefficients) for r in fit_block(fitter, np.zeros((2, 32, 32)))]
     [6, 6]
     """
-    fit_many = getattr(fitter, "fit_many", None)
-    if fit_many is not None:
-        return list(fit_many(frames, **kwargs))
-    return [fitter.fit(frame, **kwargs) for frame in frames]
+    return list(fitter.fit_many(frames, **kwargs))
 
 
 def analyse(task: Task) -> TaskOutcome:
