@@ -57,7 +57,7 @@ logger = logging.getLogger(__name__)
 
 LOG_LAMBDA_RANGE = (-3.5, -0.5)
 """Scanned log10 of the Tikhonov start's damping (a fraction of the TIF's DC gain)."""
-_LAMBDA_POINTS = 11
+_LAMBDA_POINTS = 7
 _START_QUANTILES = (0.0, 0.01, 0.05, 0.2)
 """Where the filtered dwell is raised to 0 before the projection clips what is still negative: at
 its minimum (RIFTA's full piston) or at a low quantile (a part left negative is clipped: the pits
@@ -162,9 +162,16 @@ class _Operator:
         self.shape = problem.target.shape
         self.dc = float(abs(problem.spectrum[0, 0]))
         self.z = np.where(problem.aperture, problem.target, 0.0)
+        self.spectrum = problem.spectrum.astype(np.complex64)  # single precision: see _convolve
+
+    def _convolve(self, values: NDArray[np.float64], spectrum: NDArray[np.complex64]) -> NDArray[np.float64]:
+        """Circular convolution in single precision (twice as fast; its ~1e-7 relative error is
+        ~1e-4 nm on a 1000 nm removal, far below anything the figure is judged on)."""
+        transformed = fft.rfft2(values.astype(np.float32)) * spectrum
+        return fft.irfft2(transformed, s=self.shape).astype(np.float64)
 
     def removal(self, dwell: NDArray[np.float64]) -> NDArray[np.float64]:
-        return fft.irfft2(fft.rfft2(dwell) * self.problem.spectrum, s=self.shape)
+        return self._convolve(dwell, self.spectrum)
 
     def misfit(self, dwell: NDArray[np.float64]) -> NDArray[np.float64]:
         """Removal less the surface on the clear aperture, its mean removed; 0 elsewhere."""
@@ -177,7 +184,7 @@ class _Operator:
         return float(np.sqrt(np.mean(self.misfit(dwell)[self.problem.aperture] ** 2)))
 
     def gradient(self, dwell: NDArray[np.float64]) -> NDArray[np.float64]:
-        return fft.irfft2(fft.rfft2(self.misfit(dwell)) * np.conj(self.problem.spectrum), s=self.shape)
+        return self._convolve(self.misfit(dwell), np.conj(self.spectrum))
 
     def project(self, dwell: NDArray[np.float64]) -> NDArray[np.float64]:
         """The nearest dwell in the feasible set: on the grid, in [0, cap], total <= budget."""
