@@ -108,6 +108,7 @@ def test_converges_on_the_default_station_within_the_floor(tmp_path: Path) -> No
 
 
 @require_shared_data()
+@pytest.mark.timeout(900)  # four 512 x 512 solves and runs: ~2.5 min of CPU, over 5 min on a loaded machine
 def test_the_zygo_surface_reaches_the_target_or_its_floor_within_four_runs(tmp_path: Path) -> None:
     """The issue's target on the bundled Zygo map (config/polishing-zygo.toml, the bounded solver).
 

@@ -13,7 +13,9 @@ against):
   the four sign combinations (the host knows the size of its model error, not its sign). For a
   measured TIF map the width term is left out (its shape is measured) and the rate term kept;
 - ``efficiency_nm``: a per-point efficiency uniform on ``1 +- s`` gives a removal error of
-  variance ``s^2 / 3 * sum_k (d_k K(x - x_k))^2``, here ``(d^2) * (K^2)`` on the pixel grid;
+  variance ``s^2 / 3 * sum_k (d_k K(x - x_k))^2``: each program point's squared dwell at its
+  nearest pixel, convolved with ``K^2`` (per point, not per pixel of the executed dwell map: that
+  map shares a point between pixels, which would understate the variance up to 4x);
 - ``process_nm``: the machine's process noise;
 - the measurement's noise, twice (the measurement before and the one after).
 
@@ -66,7 +68,8 @@ class JobFloor:
 
 
 def job_floor(dwell_s: NDArray[np.float64], predicted_rms_nm: float, mask: NDArray[np.bool_], tif: ToolInfluence, *,
-              rate_uncertainty: float, width_uncertainty: float, efficiency_spread: float, process_noise_nm: float,
+              points_px: NDArray[np.float64], points_dwell_s: NDArray[np.float64], rate_uncertainty: float,
+              width_uncertainty: float, efficiency_spread: float, process_noise_nm: float,
               measurement_noise_nm: float) -> JobFloor:
     """The floor of a job whose executed dwell map is ``dwell_s`` (s per pixel, the grid of ``mask``).
 
@@ -80,6 +83,10 @@ def job_floor(dwell_s: NDArray[np.float64], predicted_rms_nm: float, mask: NDArr
         The clear aperture.
     tif : ToolInfluence
         The host's model.
+    points_px : ndarray (K, 2)
+        The program's points, (row, col) pixels (fractional).
+    points_dwell_s : ndarray (K,)
+        Their dwell, s.
     rate_uncertainty, width_uncertainty, efficiency_spread : float
         Fractions (``[polishing]``).
     process_noise_nm, measurement_noise_nm : float
@@ -96,7 +103,11 @@ def job_floor(dwell_s: NDArray[np.float64], predicted_rms_nm: float, mask: NDArr
             other = _scaled(tif, rate, width)
             departure, _ = surface_stats(remove_ptt(removal_nm(dwell_s, other) - host, mask), mask)
             model = max(model, departure)
-    squared = fftconvolve(dwell_s**2, tif.kernel_nm_per_s**2, mode="same")
+    at = np.zeros(dwell_s.shape)
+    rows = np.clip(np.rint(points_px[:, 0]).astype(np.intp), 0, dwell_s.shape[0] - 1)
+    cols = np.clip(np.rint(points_px[:, 1]).astype(np.intp), 0, dwell_s.shape[1] - 1)
+    np.add.at(at, (rows, cols), np.asarray(points_dwell_s, dtype=np.float64) ** 2)
+    squared = fftconvolve(at, tif.kernel_nm_per_s**2, mode="same")
     efficiency = math.sqrt(max(float(np.mean(squared[mask])), 0.0) * efficiency_spread**2 / 3.0)
     return JobFloor(float(predicted_rms_nm), model, efficiency, float(process_noise_nm), float(measurement_noise_nm))
 

@@ -212,7 +212,9 @@ def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSe
                 logger.info("job planned with %s %s after %d other tries: %s", kind, label, len(refusals),
                             "; ".join(refusals))
             program, executed, removal, residual, rms, pv = tried
-            floor = job_floor(executed, rms, measurement.mask, tif, rate_uncertainty=settings.tif_rate_uncertainty,
+            points = np.column_stack(frame.to_px(program.x_mm, program.y_mm))
+            floor = job_floor(executed, rms, measurement.mask, tif, points_px=points, points_dwell_s=program.dwell_s,
+                              rate_uncertainty=settings.tif_rate_uncertainty,
                               width_uncertainty=settings.tif_width_uncertainty,
                               efficiency_spread=settings.efficiency_spread,
                               process_noise_nm=settings.process_noise_nm,
