@@ -59,6 +59,7 @@ def machine_removal_nm(session, job_id: int) -> tuple[np.ndarray, np.ndarray]:
 
 def check_runs(session, summary, record: Path) -> list[float]:
     """Each run's achieved removal against the machine's errors (module notes); returns each run's floor, nm."""
+    assert all(row.machine_state == "DONE" for row in summary.runs), (summary.state, summary.runs[-1])
     machine = [machine_removal_nm(session, row.job_id) for row in summary.runs]
     noise_nm = session.devices.plc_simulator.machine.settings.noise_nm
     with h5py.File(record, "r") as f:
@@ -69,7 +70,6 @@ def check_runs(session, summary, record: Path) -> list[float]:
         noise = f["measurements/noise_rms_nm"][()]
     floors = []
     for k, row in enumerate(summary.runs):
-        assert row.machine_state == "DONE", row  # a job the machine did not finish has no floor to meet
         removal, variance = machine[k]
         host_removal = before[k] - predicted[k]  # the predicted residual is the measurement less the host's removal
         departure, _ = surface_stats(remove_ptt(removal - host_removal, mask), mask)
