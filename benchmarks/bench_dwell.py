@@ -1,6 +1,6 @@
 """Benchmark of the dwell-time solvers on a realistic 512 x 512 surface with a 15-pixel FWHM TIF.
 
-Run:  .venv/bin/python benchmarks/bench_dwell.py [--fft-runs 5] [--lsq-runs 3] [--lsq-step 6]
+Run:  .venv/bin/python benchmarks/bench_dwell.py [--fft-runs 5] [--lsq-runs 3] [--lsq-step 6] [--bounded-runs 3]
 
 BLAS, FFT workers and OpenCV pinned to one thread. The surface (nm of surface height) is on a
 512 x 512 grid of 0.2 mm pixels, clear aperture a disc of radius 230 px (a 26 px margin, more than
@@ -14,7 +14,10 @@ Prints, per solver, the median wall time over its runs (after one warm-up for th
 the least-squares runs are long enough that the first one is counted) and the predicted
 residual RMS / PV in the clear aperture and the total dwell, side by side; then the FFT solver
 again with the least-squares solution's total dwell as its budget (``max_total_dwell_s``) and no
-RMS slack (the least RMS within the budget), to compare the two at equal machine time. The least-squares
+RMS slack (the least RMS within the budget), to compare the two at equal machine time; then the
+bounded solver (``solve_dwell_bounded``: Tikhonov start, projected gradient, no full piston) with
+no limits and with the same budget, and the ratios of every solver's RMS, total dwell and time to
+the FFT solver's, from the same run. The least-squares
 solver dwells on every ``--lsq-step``-th pixel of the dwell grid in both directions: the full
 grid (~200,000 points, ~250 million matrix entries) does not fit the solver's matrix budget.
 At 6 px (0.94 sigma) the lattice's Nyquist frequency is one the TIF passes at 0.4 % of its DC
@@ -39,7 +42,14 @@ import numpy as np  # noqa: E402
 from scipy.ndimage import distance_transform_edt  # noqa: E402
 
 from wavestack.pipeline import read_measured_map, zernike_basis  # noqa: E402
-from wavestack.pipeline.polishing import DwellSolution, ToolInfluence, dwell_grid, solve_dwell_fft, solve_dwell_lsq  # noqa: E402
+from wavestack.pipeline.polishing import (  # noqa: E402
+    DwellSolution,
+    ToolInfluence,
+    dwell_grid,
+    solve_dwell_bounded,
+    solve_dwell_fft,
+    solve_dwell_lsq,
+)
 
 ZYGO = Path("/work/shared/data/zygo-dat/valid_zygo_dat_file.dat")
 SIZE, RADIUS_PX, PIXEL_MM = 512, 230.0, 0.2
@@ -88,6 +98,7 @@ def main() -> None:
     parser.add_argument("--fft-runs", type=int, default=5, help="timed FFT solves (default 5)")
     parser.add_argument("--lsq-runs", type=int, default=3, help="timed least-squares solves (default 3)")
     parser.add_argument("--lsq-step", type=int, default=6, help="least-squares dwell point spacing, px (default 6)")
+    parser.add_argument("--bounded-runs", type=int, default=3, help="timed bounded solves (default 3)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     height, aperture = surface()
@@ -103,17 +114,26 @@ def main() -> None:
     lsq, lsq_s = timed(lambda: solve_dwell_lsq(height, aperture, tif, points_px=points), args.lsq_runs, warm_up=False)
     budget = lsq.total_dwell_s
     held, held_s = timed(lambda: solve_dwell_fft(height, aperture, tif, max_total_dwell_s=budget, rms_tolerance=0.0), args.fft_runs, warm_up=True)
-    print(f"{'solver':<34}{'time (median)':>16}{'RMS nm':>10}{'PV nm':>10}{'total dwell s':>16}")
+    free, free_s = timed(lambda: solve_dwell_bounded(height, aperture, tif), args.bounded_runs, warm_up=False)
+    bounded, bounded_s = timed(lambda: solve_dwell_bounded(height, aperture, tif, max_total_dwell_s=budget),
+                               args.bounded_runs, warm_up=False)
+    print(f"{'solver':<38}{'time (median)':>16}{'RMS nm':>10}{'PV nm':>10}{'total dwell s':>16}"
+          f"{'RMS / fft':>11}{'dwell / fft':>13}{'time / fft':>12}")
     for name, solution, seconds, runs in (
         (f"fft (RIFTA-style, {grid.sum()} px grid)", fft, fft_s, args.fft_runs),
         (f"lsq (every {args.lsq_step} px: {points.shape[0]} points)", lsq, lsq_s, args.lsq_runs),
         ("fft, budget = lsq's dwell, no slack", held, held_s, args.fft_runs),
+        ("bounded (Tikhonov + FISTA), no limits", free, free_s, args.bounded_runs),
+        ("bounded, budget = lsq's dwell", bounded, bounded_s, args.bounded_runs),
     ):
-        print(f"{name:<34}{seconds:>9.2f} s (N={runs}){solution.rms_nm:>10.3f}{solution.pv_nm:>10.2f}"
-              f"{solution.total_dwell_s:>16.0f}")
+        print(f"{name:<38}{seconds:>9.2f} s (N={runs}){solution.rms_nm:>10.3f}{solution.pv_nm:>10.2f}"
+              f"{solution.total_dwell_s:>16.0f}{solution.rms_nm / fft.rms_nm:>11.3f}"
+              f"{solution.total_dwell_s / fft.total_dwell_s:>13.3f}{seconds / fft_s:>12.1f}")
     print(f"fft: threshold {fft.diagnostics['threshold']:.3g}, iterations {fft.diagnostics['iterations_run']}, "
           f"piston dwell {fft.diagnostics['piston_dwell_s']:.3g} s/px; lsq: {lsq.diagnostics['nonzeros']} matrix "
-          f"entries, {lsq.diagnostics['iterations']} trust-region iterations ({lsq.diagnostics['message']})")
+          f"entries, {lsq.diagnostics['iterations']} trust-region iterations ({lsq.diagnostics['message']}); bounded: "
+          f"start lambda {bounded.diagnostics['damping']:.3g}, {bounded.diagnostics['iterations_run']} iterations "
+          f"({bounded.diagnostics['stopped']})")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Benchmark of the closed polishing loop: one campaign on a simulated polishing station, run by run.
 
-Run:  .venv/bin/python benchmarks/bench_polish.py [--config F.toml] [--max-runs 4] [--solver fft|lsq]
+Run:  .venv/bin/python benchmarks/bench_polish.py [--config F.toml] [--max-runs 4] [--solver fft|lsq|bounded]
       [--target-rms-nm 5] [--json]
 
 BLAS pinned to one thread, as the command line does. The default is the packaged simulated station
@@ -35,7 +35,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--config", help="polishing station TOML (default: the packaged simulated station)")
     parser.add_argument("--max-runs", type=int, default=4)
-    parser.add_argument("--solver", choices=("fft", "lsq"))
+    parser.add_argument("--solver", choices=("fft", "lsq", "bounded"))
     parser.add_argument("--target-rms-nm", type=float, default=5.0)
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()

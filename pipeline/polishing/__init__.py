@@ -10,7 +10,8 @@ rates in nm/s, the grid the camera's pixel grid.
 * :func:`dwell_grid` (the clear aperture grown by the TIF), :func:`extend_surface`;
 * solvers, both returning a :class:`DwellSolution` with dwell >= 0:
   :func:`solve_dwell_fft` (thresholded inverse filter, RIFTA-style) and :func:`solve_dwell_lsq`
-  (bounded least squares on any set of dwell points);
+  (bounded least squares on any set of dwell points), and :func:`solve_dwell_bounded` (bounded
+  least squares with FFT operators on the whole dwell grid: a Tikhonov start, projected gradient);
 * the machine program: :class:`GridFrame` (pixels <-> the machine frame, mm), :class:`MachineLimits`,
   :func:`plan_program` (a raster or spiral path, feed from dwell, the feed floor and acceleration
   bound), :class:`MachineProgram` with its :class:`PlanReport`, and :func:`check_program`
@@ -19,6 +20,7 @@ rates in nm/s, the grid the camera's pixel grid.
 
 from __future__ import annotations
 
+from .bounded_solver import solve_dwell_bounded
 from .extension import dwell_grid, extend_surface
 from .fft_solver import solve_dwell_fft
 from .grid import GridFrame
@@ -45,6 +47,7 @@ __all__ = [
     "extend_surface",
     "removal_nm",
     "residual_after",
+    "solve_dwell_bounded",
     "solve_dwell_fft",
     "solve_dwell_lsq",
 ]

@@ -16,7 +16,7 @@ from fuzz import fuzz_settings
 from wavestack.config.polishing import MachineSettings, PolishingSettings, TifSettings
 from wavestack.pipeline.polishing import GridFrame, ToolInfluence, removal_nm
 from wavestack.polish.measurement import MapSample, average_surface
-from wavestack.polish.planning import NoFittingJob, lattice_points, plan_job
+from wavestack.polish.planning import GENTLER, NoFittingJob, lattice_points, plan_job
 
 SHAPE, PIXEL_MM = (32, 32), 0.5
 TIF = TifSettings(fwhm_mm=2.0, peak_rate_nm_s=5.0)
@@ -35,14 +35,14 @@ def _measurement(seed: int, amplitude_nm: float, correlation_px: float):
 
 @fuzz_settings(200)
 @given(st.integers(0, 2**32 - 1), st.floats(1.0, 200.0), st.floats(1.0, 6.0), st.integers(1, 3),
-       st.sampled_from(["raster", "spiral"]), st.floats(5.0, 200.0))
+       st.sampled_from(["raster", "spiral"]), st.floats(5.0, 200.0), st.sampled_from(["fft", "bounded"]))
 def test_a_planned_job_is_executable(seed: int, amplitude_nm: float, correlation_px: float, step_px: int,
-                                     path: str, max_feed_mm_s: float) -> None:
+                                     path: str, max_feed_mm_s: float, solver: str) -> None:
     measurement = _measurement(seed, amplitude_nm, correlation_px)
     machine = MachineSettings(max_feed_mm_s=max_feed_mm_s, max_accel_mm_s2=500.0, travel_x_mm=(-9.0, 9.0),
                               travel_y_mm=(-9.0, 9.0), max_dwell_per_point_s=30.0, path=path, step_px=step_px)
     settings = PolishingSettings(pixel_mm=PIXEL_MM, tif=TIF, machine=machine, max_total_dwell_s=5000.0,
-                                 max_removal_nm_per_run=2000.0)
+                                 max_removal_nm_per_run=2000.0, solver=solver)
     tif = ToolInfluence.gaussian(TIF.fwhm_mm, TIF.peak_rate_nm_s, PIXEL_MM)
     try:
         job = plan_job(measurement, tif, settings)
@@ -58,6 +58,8 @@ def test_a_planned_job_is_executable(seed: int, amplitude_nm: float, correlation
     np.testing.assert_allclose(job.dwell_s, program.dwell_map(GridFrame(SHAPE, PIXEL_MM)), atol=1e-9)
     np.testing.assert_allclose(job.removal_nm, removal_nm(job.dwell_s, tif), atol=1e-6)
     assert job.removal_nm.max() <= 2000.0 and np.isfinite(job.predicted_rms_nm)
+    assert job.solution.solver == solver
+    assert job.floor is not None and job.floor.floor_nm >= job.predicted_rms_nm
 
 
 def test_the_ladder_refuses_with_every_reason_when_nothing_fits() -> None:
@@ -104,3 +106,16 @@ def test_a_solution_over_the_per_point_limit_is_clipped_only_when_nothing_fits_a
     tight = plan_job(measurement, tif, settings(8.0))
     assert tight.program.dwell_s.max() <= 8.0 * (1 + 1e-9)
     assert tight.predicted_rms_nm < 0.75 * measurement.rms_nm
+
+
+def test_the_bounded_plan_fits_the_limits_at_its_first_rung_and_improves() -> None:
+    measurement = _measurement(4, 50.0, 2.0)
+    machine = MachineSettings(travel_x_mm=(-9.0, 9.0), travel_y_mm=(-9.0, 9.0), max_dwell_per_point_s=4.0, step_px=1)
+    settings = PolishingSettings(pixel_mm=PIXEL_MM, tif=TIF, machine=machine, solver="bounded",
+                                 max_total_dwell_s=400.0, max_removal_nm_per_run=500.0)
+    tif = ToolInfluence.gaussian(TIF.fwhm_mm, TIF.peak_rate_nm_s, PIXEL_MM)
+    job = plan_job(measurement, tif, settings)
+    assert job.solution.solver == "bounded" and job.gentleness == GENTLER["bounded"][0]
+    assert job.program.dwell_s.max() <= 4.0 * (1 + 1e-9) and job.program.total_dwell_s <= 400.0 * (1 + 1e-9)
+    assert job.removal_nm.max() <= 500.0
+    assert job.predicted_rms_nm < 0.5 * measurement.rms_nm

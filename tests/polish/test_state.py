@@ -27,6 +27,7 @@ EXPECTED = {
     (P.CHECKING, E.AT_TARGET): P.TARGET_MET, (P.CHECKING, E.RUNS_EXHAUSTED): P.MAX_RUNS,
     (P.CHECKING, E.NOT_IMPROVED): P.NOT_IMPROVING, (P.CHECKING, E.NEEDS_WORK): P.SOLVING,
     (P.SOLVING, E.SOLVED): P.PROGRAMMING, (P.SOLVING, E.NO_GAIN): P.NOT_IMPROVING,
+    (P.SOLVING, E.AT_FLOOR): P.FLOOR_REACHED,
     (P.PROGRAMMING, E.PROGRAMMED): P.HANDING_OFF,
     (P.HANDING_OFF, E.HANDED_OFF): P.POLISHING, (P.POLISHING, E.MACHINE_DONE): P.MEASURING,
 }
@@ -102,3 +103,11 @@ def test_the_check_step_verdicts_in_order() -> None:
     # a required improvement of 10 %: 20 -> 18.5 is not enough
     assert judge_measurement(18.5, 20.0, 1, min_improvement=0.1, **kw)[0] is E.NOT_IMPROVED
     assert judge_measurement(17.5, 20.0, 1, min_improvement=0.1, **kw)[0] is E.NEEDS_WORK
+
+
+def test_the_floor_is_a_terminal_stop_reached_only_from_solving() -> None:
+    assert P.FLOOR_REACHED in TERMINAL_PHASES
+    assert {phase for (phase, _), f in TRANSITIONS.items() if f is P.FLOOR_REACHED} == {P.SOLVING}
+    stopped = advance(LoopState(P.SOLVING, runs_done=3), E.AT_FLOOR, "floor reached: 6.2 nm")
+    assert (stopped.phase, stopped.runs_done, stopped.reason) == (P.FLOOR_REACHED, 3, "floor reached: 6.2 nm")
+    assert advance(stopped, E.NEEDS_WORK) == stopped

@@ -60,7 +60,7 @@ def add_polish_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--target-rms-nm", type=_non_negative_float, metavar="X",
                         help="stop once the surface RMS is at most X nm (default: [polishing] target_rms_nm)")
     parser.add_argument("--max-runs", type=positive_int, metavar="N", help="most polishing runs (default: config)")
-    parser.add_argument("--solver", choices=("fft", "lsq"), help="dwell solver (default: [polishing] solver)")
+    parser.add_argument("--solver", choices=("fft", "lsq", "bounded"), help="dwell solver (default: [polishing] solver)")
     parser.add_argument("--json", action="store_true", help="one JSON object per run, then a summary")
     parser.add_argument("--record", metavar="FILE.h5", help="record every measurement, job and run (HDF5)")
     parser.add_argument("--plots", metavar="DIR", help="one PNG per run (created if absent)")

@@ -86,7 +86,8 @@ class PolishingSettings:
 
     target_rms_nm: float = setting(5.0, minimum=0.0, maximum=1e5, doc="stop once the surface RMS is at most this, nm")
     max_runs: int = setting(4, minimum=1, maximum=1000, doc="most polishing runs (jobs) in one campaign")
-    solver: Literal["fft", "lsq"] = setting("fft", doc="dwell solver: RIFTA FFT inverse filter or constrained LSQ")
+    solver: Literal["fft", "lsq", "bounded"] = setting(
+        "fft", doc="dwell solver: RIFTA FFT inverse filter, constrained LSQ, or bounded LSQ with FFT operators")
     averaged_results: int = setting(8, minimum=2, maximum=1000, doc="valid live results averaged per measurement")
     max_results_per_measurement: int = setting(64, minimum=2, maximum=100000,
                                                doc="results looked at before a measurement gives up")
@@ -106,6 +107,15 @@ class PolishingSettings:
                            doc="pixels taken off the measured aperture's rim (its phase is the noisiest)")
     reflection_factor: float = setting(2.0, minimum=0.1, maximum=10.0,
                                        doc="wavefront per surface (2: reflection at normal incidence)")
+    tif_rate_uncertainty: float = setting(0.03, minimum=0.0, maximum=1.0,
+                                          doc="how far the real tool's removal rate may be from the model (fraction)")
+    tif_width_uncertainty: float = setting(0.03, minimum=0.0, maximum=1.0,
+                                           doc="how far the real tool's width may be from the model (fraction)")
+    efficiency_spread: float = setting(0.02, minimum=0.0, maximum=1.0,
+                                       doc="per-point removal efficiency spread, 1 +- this (uniform)")
+    process_noise_nm: float = setting(0.2, minimum=0.0, maximum=1e4, doc="process noise a job leaves, nm RMS")
+    floor_tolerance: float = setting(0.1, minimum=0.0, maximum=10.0,
+                                     doc="stop at the floor once the RMS is within this fraction above it")
     target_figure: str | None = setting(None, doc="a .npy map of the target surface, nm, subtracted (else PTT only)")
     tif: TifSettings = field(default_factory=TifSettings)
     machine: MachineSettings = field(default_factory=MachineSettings)

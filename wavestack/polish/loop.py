@@ -226,7 +226,11 @@ class PolishingLoop:
             return LoopEvent.FAULT, f"no job: {error}"
         p = c.planned
         what = (f"{self._options.solver} dwell ({p.gentleness:g}): {p.program.x_mm.size} points, "
-                f"{p.program.total_dwell_s:.0f} s; predicted {p.predicted_rms_nm:.2f} nm RMS ({p.solve_s:.1f} s)")
+                f"{p.program.total_dwell_s:.0f} s; predicted {p.predicted_rms_nm:.2f} nm RMS ({p.solve_s:.1f} s)"
+                + (f"; {p.floor.describe()}" if p.floor is not None else ""))
+        if p.floor is not None and m.rms_nm <= p.floor.floor_nm * (1.0 + self._settings.floor_tolerance):
+            return LoopEvent.AT_FLOOR, (f"floor reached: RMS {m.rms_nm:.2f} nm is within "
+                                        f"{self._settings.floor_tolerance:.0%} of the best job's {what}")
         if not p.predicted_rms_nm < m.rms_nm * (1.0 - self._settings.min_improvement):
             return LoopEvent.NO_GAIN, f"at the floor: the best job within the limits is not predicted to improve " \
                                       f"on {m.rms_nm:.2f} nm ({what})"
@@ -256,7 +260,8 @@ class PolishingLoop:
                           noise_before_nm=m.noise_rms_nm, predicted_rms_nm=planned.predicted_rms_nm,
                           predicted_pv_nm=planned.predicted_pv_nm, total_dwell_s=float(receipt.total_dwell_s),
                           points=int(receipt.point_count), job_crc32=int(receipt.crc32), started_unix_s=time.time(),
-                          solve_s=planned.solve_s)
+                          solve_s=planned.solve_s,
+                          floor_nm=planned.floor.floor_nm if planned.floor is not None else float("nan"))
         index = None
         if self._recorder is not None:
             index = self._recorder.run_started(row, measured_nm=m.surface_nm, dwell_s=planned.dwell_s,

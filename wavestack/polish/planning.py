@@ -41,9 +41,11 @@ from wavestack.pipeline.polishing import (
     plan_program,
     removal_nm,
     residual_after,
+    solve_dwell_bounded,
     solve_dwell_fft,
     solve_dwell_lsq,
 )
+from wavestack.polish.floor import JobFloor, job_floor
 from wavestack.polish.measurement import Measurement
 
 logger = logging.getLogger(__name__)
@@ -52,9 +54,12 @@ __all__ = ["GENTLER", "NoFittingJob", "PlannedJob", "host_tif", "job_file_of", "
 
 
 #: The solvers' settings tried in turn, gentlest last: ``rms_tolerance`` of the FFT solver (the
-#: residual it may leave above its best, as a fraction of the input RMS) and ``damping`` of the
-#: least squares.
-GENTLER: Final = {"fft": (0.02, 0.05, 0.1, 0.2, 0.4), "lsq": (0.0, 1e-3, 1e-2, 1e-1, 1.0)}
+#: residual it may leave above its best, as a fraction of the input RMS), ``damping`` of the
+#: least squares, and for the bounded solver the share of the job's limits (total dwell, removal
+#: depth) it is given: it keeps within them itself, so only the program's own additions (the feed
+#: floor, the lattice's sampling) can push a job over, and a smaller share makes room for them.
+GENTLER: Final = {"fft": (0.02, 0.05, 0.1, 0.2, 0.4), "lsq": (0.0, 1e-3, 1e-2, 1e-1, 1.0),
+                  "bounded": (0.95, 0.8, 0.6, 0.4)}
 
 
 class NoFittingJob(ValueError):
@@ -82,6 +87,8 @@ class PlannedJob:
         Seconds the solver and planner took (every attempt).
     gentleness : float
         The setting of :data:`GENTLER` the job was solved with.
+    floor : JobFloor or None
+        What the measurement after the job should show (:mod:`~wavestack.polish.floor`).
     """
 
     solution: DwellSolution
@@ -93,6 +100,7 @@ class PlannedJob:
     predicted_pv_nm: float
     solve_s: float
     gentleness: float = 0.0
+    floor: JobFloor | None = None
 
 
 def host_tif(settings: TifSettings, pixel_mm: float, base: Path | None = None) -> ToolInfluence:
@@ -136,7 +144,12 @@ def _solve(measurement: Measurement, tif: ToolInfluence, settings: PolishingSett
     if kind == "lsq":  # one dwell point per program lattice point: the matrix stays within its budget
         return solve_dwell_lsq(surface, mask, tif, points_px=lattice_points(mask.shape, settings.machine.step_px),
                                max_dwell_s=settings.machine.max_dwell_per_point_s, damping=gentleness)
-    raise ValueError(f"solver: expected 'fft' or 'lsq', got {kind!r}")
+    if kind == "bounded":  # a program point gathers the step x step pixels around it
+        return solve_dwell_bounded(surface, mask, tif,
+                                   max_dwell_s=settings.machine.max_dwell_per_point_s / settings.machine.step_px**2,
+                                   max_total_dwell_s=settings.max_total_dwell_s * gentleness,
+                                   max_removal_nm=settings.max_removal_nm_per_run * gentleness)
+    raise ValueError(f"solver: expected 'fft', 'lsq' or 'bounded', got {kind!r}")
 
 
 #: A checked program with its prediction: program, executed dwell (s), removal (nm), residual (nm), RMS, PV (nm).
@@ -168,7 +181,7 @@ def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSe
     tif : ToolInfluence
         The host's model.
     settings : PolishingSettings
-    solver : {"fft", "lsq"}, optional
+    solver : {"fft", "lsq", "bounded"}, optional
         Overrides ``settings.solver``.
 
     Raises
@@ -181,7 +194,7 @@ def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSe
     tick = time.perf_counter()
     kind = solver or settings.solver
     if kind not in GENTLER:
-        raise ValueError(f"solver: expected 'fft' or 'lsq', got {kind!r}")
+        raise ValueError(f"solver: expected 'fft', 'lsq' or 'bounded', got {kind!r}")
     frame = GridFrame(shape=measurement.mask.shape, pixel_mm=settings.pixel_mm)
     limits = machine_limits(settings)
     refusals: list[str] = []
@@ -199,8 +212,15 @@ def plan_job(measurement: Measurement, tif: ToolInfluence, settings: PolishingSe
                 logger.info("job planned with %s %s after %d other tries: %s", kind, label, len(refusals),
                             "; ".join(refusals))
             program, executed, removal, residual, rms, pv = tried
+            points = np.column_stack(frame.to_px(program.x_mm, program.y_mm))
+            floor = job_floor(executed, rms, measurement.mask, tif, points_px=points, points_dwell_s=program.dwell_s,
+                              rate_uncertainty=settings.tif_rate_uncertainty,
+                              width_uncertainty=settings.tif_width_uncertainty,
+                              efficiency_spread=settings.efficiency_spread,
+                              process_noise_nm=settings.process_noise_nm,
+                              measurement_noise_nm=measurement.noise_rms_nm)
             return PlannedJob(solutions[gentleness], program, executed, removal, residual, rms, pv,
-                              time.perf_counter() - tick, gentleness)
+                              time.perf_counter() - tick, gentleness, floor)
     raise NoFittingJob(f"no {kind} job fits the limits ({len(refusals)} tried): " + "; ".join(refusals))
 
 

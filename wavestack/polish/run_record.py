@@ -52,6 +52,9 @@ class RunRecord:
         When the job was handed off (``time.time()``).
     solve_s, run_s : float
         Seconds spent in the solver; wall-clock seconds from the measurement before to the one after.
+    floor_nm : float
+        What the measurement after the job should show: the predicted residual with the machine's
+        model errors and the noise in quadrature (:mod:`~wavestack.polish.floor`).
     """
 
     run: int
@@ -74,6 +77,7 @@ class RunRecord:
     machine_reason: str = ""
     points_done: int = -1
     run_s: float = _NAN
+    floor_nm: float = _NAN
 
     def to_json(self) -> dict[str, object]:
         """``{"type": "run", ...}`` with every field (NaN as null)."""
@@ -83,7 +87,7 @@ class RunRecord:
 
 def run_started(run: int, job_id: int, *, rms_before_nm: float, pv_before_nm: float, noise_before_nm: float,
                 predicted_rms_nm: float, predicted_pv_nm: float, total_dwell_s: float, points: int, job_crc32: int,
-                started_unix_s: float, solve_s: float) -> RunRecord:
+                started_unix_s: float, solve_s: float, floor_nm: float = _NAN) -> RunRecord:
     """The row of a run whose job was just handed off.
 
     Example
@@ -96,7 +100,8 @@ def run_started(run: int, job_id: int, *, rms_before_nm: float, pv_before_nm: fl
     """
     ratio = rms_before_nm / predicted_rms_nm if predicted_rms_nm > 0 else math.inf
     return RunRecord(run, job_id, rms_before_nm, pv_before_nm, noise_before_nm, predicted_rms_nm, predicted_pv_nm,
-                     total_dwell_s, points, job_crc32, started_unix_s, solve_s, predicted_ratio=ratio)
+                     total_dwell_s, points, job_crc32, started_unix_s, solve_s, predicted_ratio=ratio,
+                     floor_nm=floor_nm)
 
 
 def run_finished(row: RunRecord, *, measured_rms_nm: float = _NAN, measured_pv_nm: float = _NAN,
@@ -131,5 +136,6 @@ def run_line(row: RunRecord) -> str:
                 if math.isfinite(row.measured_rms_nm) else "measured -")
     state = f"; machine {row.machine_state} {row.points_done}/{row.points}" if row.machine_state else ""
     return (f"run {row.run} (job {row.job_id}): RMS/PV before {row.rms_before_nm:.2f} / {row.pv_before_nm:.1f} nm, "
-            f"predicted {row.predicted_rms_nm:.2f} / {row.predicted_pv_nm:.1f} nm, {measured}; "
+            f"predicted {row.predicted_rms_nm:.2f} / {row.predicted_pv_nm:.1f} nm, floor {row.floor_nm:.2f} nm, "
+            f"{measured}; "
             f"dwell {row.total_dwell_s:.0f} s{state}")

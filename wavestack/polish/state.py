@@ -1,8 +1,9 @@
 """The polishing loop's life as data: a frozen state, the events, and one pure transition.
 
 One run of the loop is measure -> check -> solve -> program -> hand-off -> wait -> measure. The
-loop stops at the target RMS, after ``max_runs`` runs, when a run fails to improve the RMS, on any
-fault, or when the operator stops it; each stop is a terminal phase that names why, and a terminal
+loop stops at the target RMS, at the floor (the best job within the machine's limits and its model
+errors would not lower the RMS by more than the tolerance), after ``max_runs`` runs, when a run
+fails to improve the RMS, on any fault, or when the operator stops it; each stop is a terminal phase that names why, and a terminal
 phase never leaves (every later event is ignored), so nothing is sent after a stop. The table
 :data:`TRANSITIONS` is the whole machine; :func:`advance` applies it. An event a phase does not
 expect (a bug in the caller, or a device that reports nonsense) ends the loop in
@@ -35,6 +36,7 @@ class LoopPhase(enum.Enum):
     TARGET_MET = "target-met"        # terminal: RMS at or below the target
     MAX_RUNS = "max-runs"            # terminal: the run budget is spent
     NOT_IMPROVING = "not-improving"  # terminal: the last run did not lower the RMS, or no job would
+    FLOOR_REACHED = "floor-reached"  # terminal: the RMS is within the tolerance of the floor of the best job
     FAULTED = "faulted"              # terminal: a fault (the reason says which)
     INTERRUPTED = "interrupted"      # terminal: the operator stopped the loop
 
@@ -50,6 +52,7 @@ class LoopEvent(enum.Enum):
     NEEDS_WORK = "needs-work"
     SOLVED = "solved"
     NO_GAIN = "no-gain"              # the best job within the limits is not predicted to lower the RMS
+    AT_FLOOR = "at-floor"            # the RMS is within the tolerance of the best job's floor
     PROGRAMMED = "programmed"
     HANDED_OFF = "handed-off"        # the machine accepted and started the job
     MACHINE_DONE = "machine-done"    # the machine finished the job
@@ -59,7 +62,7 @@ class LoopEvent(enum.Enum):
 
 #: Phases the loop never leaves.
 TERMINAL_PHASES: Final = frozenset({LoopPhase.TARGET_MET, LoopPhase.MAX_RUNS, LoopPhase.NOT_IMPROVING,
-                                    LoopPhase.FAULTED, LoopPhase.INTERRUPTED})
+                                    LoopPhase.FLOOR_REACHED, LoopPhase.FAULTED, LoopPhase.INTERRUPTED})
 
 _P, _E = LoopPhase, LoopEvent
 #: (phase, event) -> next phase, for every expected event of every working phase. FAULT and STOP
@@ -73,6 +76,7 @@ TRANSITIONS: Final[dict[tuple[LoopPhase, LoopEvent], LoopPhase]] = {
     (_P.CHECKING, _E.NEEDS_WORK): _P.SOLVING,
     (_P.SOLVING, _E.SOLVED): _P.PROGRAMMING,
     (_P.SOLVING, _E.NO_GAIN): _P.NOT_IMPROVING,
+    (_P.SOLVING, _E.AT_FLOOR): _P.FLOOR_REACHED,
     (_P.PROGRAMMING, _E.PROGRAMMED): _P.HANDING_OFF,
     (_P.HANDING_OFF, _E.HANDED_OFF): _P.POLISHING,
     (_P.POLISHING, _E.MACHINE_DONE): _P.MEASURING,
