@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Set-up and entry point for a fresh machine: needs only python3.
 
-    python3 ws.py test [PYTEST-ARGS...]   run the test suite
+    python3 ws.py test [PYTEST-ARGS...]   run the test suite (one worker per core; ``-n 0``: one process)
     python3 ws.py COMMAND [ARGS...]       run `wavestack COMMAND ARGS...` (e.g. `fit --example`)
 
 The first call creates ``.venv`` beside this file and installs wavestack into it (editable, with
@@ -71,6 +71,18 @@ def ensure_chromium() -> None:
         raise OSError(f"apt-get installed chromium but {CHROMIUM} is still missing")
 
 
+def _parallel(pytest_args: list[str]) -> list[str]:
+    """One pytest worker per core (pytest-xdist), a test file's tests on one worker, unless the caller chose.
+
+    Example
+    -------
+    >>> _parallel([]), _parallel(["-n", "0"])
+    (['-n', 'auto', '--dist', 'loadfile'], [])
+    """
+    chosen = any(a in {"-n", "--numprocesses"} or a.startswith(("-n", "--numprocesses=")) for a in pytest_args)
+    return [] if chosen else ["-n", "auto", "--dist", "loadfile"]
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0] in {"-h", "--help"}:
         print(__doc__.strip())
@@ -83,7 +95,7 @@ def main(argv: list[str]) -> int:
         print(f"ws.py: set-up failed: {error}", file=sys.stderr)
         return 1
     if argv[0] == "test":
-        command = [str(_venv_bin("python")), "-m", "pytest", *argv[1:]]
+        command = [str(_venv_bin("python")), "-m", "pytest", *_parallel(argv[1:]), *argv[1:]]
     else:
         command = [str(_venv_bin("wavestack")), *argv]
     return subprocess.run(command, cwd=ROOT).returncode
