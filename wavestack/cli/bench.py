@@ -21,7 +21,7 @@ from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
 from wavestack.cli.outputs import json_text
 from wavestack.config import load_station_config
-from wavestack.cli.polish import check_plots_folder
+from wavestack.cli.outputs import check_plots_folder
 from wavestack.figures import write_paper_figures
 from wavestack.pipeline import InputError
 

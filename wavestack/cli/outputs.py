@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from wavestack.pipeline import InputError
 from wavestack.station import json_ready
 
-__all__ = ["check_output_file", "json_text", "require_finite", "save_npy"]
+__all__ = ["check_output_file", "check_plots_folder", "json_text", "require_finite", "save_npy"]
 
 
 def check_output_file(path: str | Path, option: str) -> Path:
@@ -67,6 +67,22 @@ def check_output_file(path: str | Path, option: str) -> Path:
     if not os.access(folder, os.W_OK | os.X_OK) or (mode is not None and not os.access(target, os.W_OK)):
         raise InputError(f"{target}: {option} is not writable (permission denied)")
     return target
+
+
+def check_plots_folder(text: str) -> Path:
+    """The ``--plots`` folder: an existing writable folder, or a new one whose parent is writable (not created yet)."""
+    folder = Path(text)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"--plots {folder}: not a folder; expected a folder for the figures")
+    if folder.is_dir():
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise InputError(f"--plots {folder}: cannot write in this folder")
+        return folder
+    parent = folder.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"--plots {folder}: folder {parent} does not exist or is not writable; expected a folder "
+                         "that exists or can be made")
+    return folder
 
 
 def save_npy(path: Path, array: NDArray) -> None:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 import threading
 from contextlib import ExitStack
@@ -26,7 +25,7 @@ from typing import TextIO
 from wavestack import __version__
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
-from wavestack.cli.outputs import json_text
+from wavestack.cli.outputs import check_plots_folder, json_text
 from wavestack.cli.signals import stop_on_signals
 from wavestack.cli.web_view import add_web_arguments, chain, open_web_view
 from wavestack.config.polishing import load_polishing_config
@@ -65,22 +64,6 @@ def add_polish_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--record", metavar="FILE.h5", help="record every measurement, job and run (HDF5)")
     parser.add_argument("--plots", metavar="DIR", help="one PNG per run (created if absent)")
     add_web_arguments(parser)
-
-
-def check_plots_folder(text: str) -> Path:
-    """The ``--plots`` folder: an existing writable folder, or a new one whose parent is writable (not created yet)."""
-    folder = Path(text)
-    if folder.exists() and not folder.is_dir():
-        raise InputError(f"--plots {folder}: not a folder; expected a folder for the figures")
-    if folder.is_dir():
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise InputError(f"--plots {folder}: cannot write in this folder")
-        return folder
-    parent = folder.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"--plots {folder}: folder {parent} does not exist or is not writable; expected a folder "
-                         "that exists or can be made")
-    return folder
 
 
 class _Printer:

@@ -11,7 +11,7 @@ from wavestack.cli.outputs import json_text
 from wavestack.recording import RecordingReader
 from wavestack.recording.replay import ReplayedResult, SkippedSet, recorded_config, replay
 from wavestack.config import load_station_config
-from wavestack.cli.polish import check_plots_folder
+from wavestack.cli.outputs import check_plots_folder
 from wavestack.figures import ReplayCollector, write_replay_figures
 
 
