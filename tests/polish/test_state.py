@@ -16,6 +16,7 @@ from wavestack.polish.state import (
     LoopPhase,
     LoopState,
     advance,
+    judge_job,
     judge_measurement,
 )
 
@@ -103,6 +104,19 @@ def test_the_check_step_verdicts_in_order() -> None:
     # a required improvement of 10 %: 20 -> 18.5 is not enough
     assert judge_measurement(18.5, 20.0, 1, min_improvement=0.1, **kw)[0] is E.NOT_IMPROVED
     assert judge_measurement(17.5, 20.0, 1, min_improvement=0.1, **kw)[0] is E.NEEDS_WORK
+
+
+def test_the_solve_step_verdicts_in_order() -> None:
+    kw = {"floor_tolerance": 0.1, "min_improvement": 0.05}
+    # within 10 % of the floor: stop there, even though the job is still predicted to help
+    assert judge_job(6.2, 5.9, 5.8, **kw) is E.AT_FLOOR
+    assert judge_job(6.38, 5.9, 5.8, **kw) is E.AT_FLOOR  # 5.8 x 1.1 = 6.38: the edge counts
+    assert judge_job(6.39, 5.0, 5.8, **kw) is E.SOLVED
+    assert judge_job(8.0, 6.0, None, **kw) is E.SOLVED  # no floor estimated: never at the floor
+    assert judge_job(6.0, 6.0, None, **kw) is E.NO_GAIN
+    assert judge_job(10.0, 9.6, 2.0, **kw) is E.NO_GAIN  # 4 % predicted: below the required 5 %
+    assert judge_job(10.0, 9.4, 2.0, **kw) is E.SOLVED
+    assert judge_job(10.0, float("nan"), None, **kw) is E.NO_GAIN  # a NaN prediction never polishes
 
 
 def test_the_floor_is_a_terminal_stop_reached_only_from_solving() -> None:

@@ -28,12 +28,13 @@ from wavestack.polish.state import (
     LoopPhase,
     LoopState,
     advance,
+    judge_job,
     judge_measurement,
 )
 
 __all__ = [
     "ApertureKey", "CampaignRecorder", "JobRules", "JobUnsafe", "LoopEvent", "LoopPhase", "LoopState", "MapSample",
     "Measurement", "RunRecord", "TERMINAL_PHASES", "TRANSITIONS", "UntrustedMeasurement", "advance",
-    "average_surface", "check_job", "judge_measurement", "plot_run", "remove_ptt", "run_finished", "run_line",
+    "average_surface", "check_job", "judge_job", "judge_measurement", "plot_run", "remove_ptt", "run_finished", "run_line",
     "run_plot_name", "run_started", "surface_stats",
 ]

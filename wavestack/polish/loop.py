@@ -38,7 +38,7 @@ from wavestack.polish.planning import NoFittingJob, PlannedJob, job_file_of, pla
 from wavestack.polish.plots import plot_run
 from wavestack.polish.recorder import CampaignRecorder
 from wavestack.polish.run_record import RunRecord, run_finished, run_started
-from wavestack.polish.state import LoopEvent, LoopPhase, LoopState, advance, judge_measurement
+from wavestack.polish.state import LoopEvent, LoopPhase, LoopState, advance, judge_job, judge_measurement
 
 logger = logging.getLogger(__name__)
 
@@ -228,13 +228,16 @@ class PolishingLoop:
         what = (f"{self._options.solver} dwell ({p.gentleness:g}): {p.program.x_mm.size} points, "
                 f"{p.program.total_dwell_s:.0f} s; predicted {p.predicted_rms_nm:.2f} nm RMS ({p.solve_s:.1f} s)"
                 + (f"; {p.floor.describe()}" if p.floor is not None else ""))
-        if p.floor is not None and m.rms_nm <= p.floor.floor_nm * (1.0 + self._settings.floor_tolerance):
-            return LoopEvent.AT_FLOOR, (f"floor reached: RMS {m.rms_nm:.2f} nm is within "
-                                        f"{self._settings.floor_tolerance:.0%} of the best job's {what}")
-        if not p.predicted_rms_nm < m.rms_nm * (1.0 - self._settings.min_improvement):
-            return LoopEvent.NO_GAIN, f"at the floor: the best job within the limits is not predicted to improve " \
-                                      f"on {m.rms_nm:.2f} nm ({what})"
-        return LoopEvent.SOLVED, what
+        verdict = judge_job(m.rms_nm, p.predicted_rms_nm, None if p.floor is None else p.floor.floor_nm,
+                            floor_tolerance=self._settings.floor_tolerance,
+                            min_improvement=self._settings.min_improvement)
+        if verdict is LoopEvent.AT_FLOOR:
+            return verdict, (f"floor reached: RMS {m.rms_nm:.2f} nm is within "
+                             f"{self._settings.floor_tolerance:.0%} of the best job's {what}")
+        if verdict is LoopEvent.NO_GAIN:
+            return verdict, (f"at the floor: the best job within the limits is not predicted to improve "
+                             f"on {m.rms_nm:.2f} nm ({what})")
+        return verdict, what
 
     def _program(self, c: _Campaign) -> tuple[LoopEvent, str]:
         assert c.measurement is not None and c.planned is not None and c.reference is not None

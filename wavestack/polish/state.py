@@ -21,7 +21,7 @@ import enum
 from dataclasses import dataclass, replace
 from typing import Final
 
-__all__ = ["LoopEvent", "LoopPhase", "LoopState", "TERMINAL_PHASES", "TRANSITIONS", "advance", "judge_measurement"]
+__all__ = ["LoopEvent", "LoopPhase", "LoopState", "TERMINAL_PHASES", "TRANSITIONS", "advance", "judge_job", "judge_measurement"]
 
 
 class LoopPhase(enum.Enum):
@@ -187,3 +187,39 @@ def judge_measurement(rms_nm: float, previous_rms_nm: float | None, runs_done: i
     if runs_done >= max_runs:
         return LoopEvent.RUNS_EXHAUSTED, f"{runs_done} run(s) done (max_runs = {max_runs}); RMS {rms_nm:.2f} nm"
     return LoopEvent.NEEDS_WORK, f"RMS {rms_nm:.2f} nm > target {target_rms_nm:g} nm"
+
+
+def judge_job(rms_nm: float, predicted_rms_nm: float, floor_nm: float | None, *, floor_tolerance: float,
+              min_improvement: float = 0.0) -> LoopEvent:
+    """What the best job within the limits means for the loop (pure): the solve step's event.
+
+    In this order: the measured RMS is within ``floor_tolerance`` of the job's floor (what the
+    tool cannot remove within the job's limits and the model's errors, :mod:`~wavestack.polish.floor`)
+    -> AT_FLOOR; the job is not predicted to lower the RMS by at least the fraction
+    ``min_improvement`` -> NO_GAIN; else SOLVED. The floor is checked first: at the floor a
+    job may still be predicted to help, but what it would remove is below what the machine's
+    errors put back.
+
+    Parameters
+    ----------
+    rms_nm : float
+        The measured surface RMS, nm.
+    predicted_rms_nm : float
+        The job's predicted residual RMS, nm.
+    floor_nm : float or None
+        The job's floor, nm (None: no floor estimated, never AT_FLOOR).
+    floor_tolerance : float
+        Fraction above the floor that still counts as at the floor.
+    min_improvement : float
+        Fraction of the measured RMS the job must be predicted to remove at least.
+
+    Example
+    -------
+    >>> judge_job(6.2, 5.9, 5.8, floor_tolerance=0.1).value
+    'at-floor'
+    """
+    if floor_nm is not None and rms_nm <= floor_nm * (1.0 + floor_tolerance):
+        return LoopEvent.AT_FLOOR
+    if not predicted_rms_nm < rms_nm * (1.0 - min_improvement):
+        return LoopEvent.NO_GAIN
+    return LoopEvent.SOLVED
