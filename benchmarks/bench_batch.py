@@ -1,7 +1,7 @@
 """Benchmark of ``wavestack batch``: sets per second on 1 and 2 local workers, against the station's
 processing stages alone in one process.
 
-Run:  .venv/bin/python benchmarks/bench_batch.py [--recordings 20] [--sets 12] [--cache DIR]
+Run:  .venv/bin/python benchmarks/bench_batch.py [--recordings 20] [--sets 12] [--cache DIR] [--batched-fits]
 
 The campaign: one recording made by ``wavestack run --record`` on the small simulated station
 (256 x 256, 5-frame sets), then ``--recordings`` recordings written from its sets with seeded
@@ -104,13 +104,13 @@ def _worker_pids(client: object) -> set[int]:
     return set(client.run(os.getpid).values())  # type: ignore[attr-defined]
 
 
-def batch_rate(paths: list[Path], workers: int, out: Path) -> tuple[float, int, list, CpuUse]:
+def batch_rate(paths: list[Path], workers: int, out: Path, batched_fits: bool = False) -> tuple[float, int, list, CpuUse]:
     """(seconds, sets, summaries, CPU use) of one campaign on a fresh local cluster of ``workers``."""
     import threading
 
     shutil.rmtree(out, ignore_errors=True)
     store = ResultsStore(out)
-    campaign = prepare_campaign([str(p) for p in paths], store)
+    campaign = prepare_campaign([str(p) for p in paths], store, batched_fits=batched_fits)
     with campaign_client(None, workers) as client:
         client.run(__import__, "wavestack.batch.task")  # imports paid before the clock starts
         worker_pids = _worker_pids(client)
@@ -164,6 +164,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--recordings", type=int, default=20)
     parser.add_argument("--sets", type=int, default=12, help="sets per recording")
+    parser.add_argument("--batched-fits", action="store_true", help="fit the maps sharing a fitter in batches")
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "wavestack-bench-batch")
     args = parser.parse_args()
     logging.getLogger("distributed").setLevel(logging.ERROR)
@@ -171,14 +172,15 @@ def main() -> None:
     load_before = os.getloadavg()
     out = args.cache / "results"
     first_s, alone_sets = stages_alone(paths)  # before and after the campaigns: the load drifts
-    one_s, sets, summaries, one_cpu = batch_rate(paths, 1, out)
-    two_s, _, _, two_cpu = batch_rate(paths, 2, out)
+    one_s, sets, summaries, one_cpu = batch_rate(paths, 1, out, args.batched_fits)
+    two_s, _, _, two_cpu = batch_rate(paths, 2, out, args.batched_fits)
     last_s, _ = stages_alone(paths)
     alone_s = (first_s + last_s) / 2
     load_after = os.getloadavg()
     stage = {k: sum(getattr(s, f"{k}_s") for s in summaries) for k in ("phase", "aperture", "unwrap", "fit")}
     total = sum(stage.values()) or 1.0
-    print(f"campaign: {len(paths)} recordings, {sets} sets (256 x 256, 5 frames each), cores: {os.cpu_count()}")
+    print(f"campaign: {len(paths)} recordings, {sets} sets (256 x 256, 5 frames each), cores: {os.cpu_count()}"
+          + (", batched fits" if args.batched_fits else ""))
     print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f} (shared machine: ratios, not rates)")
     print(f"1 worker : {sets / one_s:7.2f} sets/s ({one_s:.2f} s)")
     print(f"2 workers: {sets / two_s:7.2f} sets/s ({two_s:.2f} s), {one_s / two_s:.2f}x the 1-worker rate "
