@@ -104,7 +104,8 @@ def _worker_pids(client: object) -> set[int]:
     return set(client.run(os.getpid).values())  # type: ignore[attr-defined]
 
 
-def batch_rate(paths: list[Path], workers: int, out: Path, batched_fits: bool = False) -> tuple[float, int, list, CpuUse]:
+def batch_rate(paths: list[Path], workers: int, out: Path,
+               batched_fits: bool = False) -> tuple[float, int, list, CpuUse]:
     """(seconds, sets, summaries, CPU use) of one campaign on a fresh local cluster of ``workers``."""
     import threading
 
