@@ -1,7 +1,7 @@
 """Benchmark of ``wavestack batch``: sets per second on 1 and 2 local workers, against the station's
 processing stages alone in one process.
 
-Run:  .venv/bin/python benchmarks/bench_batch.py [--recordings 20] [--sets 12] [--cache DIR]
+Run:  .venv/bin/python benchmarks/bench_batch.py [--recordings 20] [--sets 12] [--cache DIR] [--batched-fits]
 
 The campaign: one recording made by ``wavestack run --record`` on the small simulated station
 (256 x 256, 5-frame sets), then ``--recordings`` recordings written from its sets with seeded
@@ -68,17 +68,78 @@ def make_campaign(cache: Path, recordings: int, sets: int) -> list[Path]:
     return paths
 
 
-def batch_rate(paths: list[Path], workers: int, out: Path) -> tuple[float, int, list]:
-    """(seconds, sets, summaries) of one campaign on a fresh local cluster of ``workers``."""
+@dataclasses.dataclass(frozen=True)
+class CpuUse:
+    """CPU seconds (user + system) spent during a campaign, by process (and the client's threads).
+
+    ``client_main``: the thread running ``run_campaign`` (receiving results, writing Parquet);
+    ``client_other``: the client process's other threads (the local scheduler's event loop, the
+    client's communication); ``workers``: each worker process; ``nannies``: their nanny processes.
+    """
+
+    client_main: float
+    client_other: float
+    workers: tuple[float, ...]
+    nannies: float
+    busy: tuple[float, ...]  # fraction of the wall time each worker spent in tasks (task stream)
+
+
+def _cpu_by_process() -> tuple[dict[int, float], dict[int, float]]:
+    """(thread id -> CPU s of this process's threads, pid -> CPU s of every descendant process)."""
+    import psutil
+
+    me = psutil.Process()
+    threads = {t.id: t.user_time + t.system_time for t in me.threads()}
+    children = {}
+    for child in me.children(recursive=True):
+        try:
+            times = child.cpu_times()
+            children[child.pid] = times.user + times.system
+        except psutil.NoSuchProcess:
+            continue
+    return threads, children
+
+
+def _worker_pids(client: object) -> set[int]:
+    return set(client.run(os.getpid).values())  # type: ignore[attr-defined]
+
+
+def batch_rate(paths: list[Path], workers: int, out: Path,
+               batched_fits: bool = False) -> tuple[float, int, list, CpuUse]:
+    """(seconds, sets, summaries, CPU use) of one campaign on a fresh local cluster of ``workers``."""
+    import threading
+
     shutil.rmtree(out, ignore_errors=True)
     store = ResultsStore(out)
-    campaign = prepare_campaign([str(p) for p in paths], store)
+    campaign = prepare_campaign([str(p) for p in paths], store, batched_fits=batched_fits)
     with campaign_client(None, workers) as client:
         client.run(__import__, "wavestack.batch.task")  # imports paid before the clock starts
+        worker_pids = _worker_pids(client)
+        threads_before, children_before = _cpu_by_process()
         tick = time.perf_counter()
-        report = run_campaign(campaign, store, client)
+        with _task_stream(client) as stream:
+            report = run_campaign(campaign, store, client)
         seconds = time.perf_counter() - tick
-    return seconds, sum(s.results + s.skipped for s in report.analysed), list(report.analysed)
+        threads_after, children_after = _cpu_by_process()
+    main = threading.get_native_id()
+    spent = {t: v - threads_before.get(t, 0.0) for t, v in threads_after.items()}
+    children = {p: v - children_before.get(p, 0.0) for p, v in children_after.items()}
+    busy: dict[str, float] = {}
+    for task in stream.data:
+        for span in task.get("startstops", ()):
+            if span.get("action") == "compute":
+                busy[task["worker"]] = busy.get(task["worker"], 0.0) + span["stop"] - span["start"]
+    use = CpuUse(spent.get(main, 0.0), sum(v for t, v in spent.items() if t != main),
+                 tuple(sorted(v for p, v in children.items() if p in worker_pids)),
+                 sum(v for p, v in children.items() if p not in worker_pids),
+                 tuple(sorted(b / seconds for b in busy.values())))
+    return seconds, sum(s.results + s.skipped for s in report.analysed), list(report.analysed), use
+
+
+def _task_stream(client: object):
+    from distributed import get_task_stream
+
+    return get_task_stream(client)
 
 
 def stages_alone(paths: list[Path]) -> tuple[float, int]:
@@ -104,6 +165,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--recordings", type=int, default=20)
     parser.add_argument("--sets", type=int, default=12, help="sets per recording")
+    parser.add_argument("--batched-fits", action="store_true", help="fit the maps sharing a fitter in batches")
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "wavestack-bench-batch")
     args = parser.parse_args()
     logging.getLogger("distributed").setLevel(logging.ERROR)
@@ -111,14 +173,15 @@ def main() -> None:
     load_before = os.getloadavg()
     out = args.cache / "results"
     first_s, alone_sets = stages_alone(paths)  # before and after the campaigns: the load drifts
-    one_s, sets, summaries = batch_rate(paths, 1, out)
-    two_s, _, _ = batch_rate(paths, 2, out)
+    one_s, sets, summaries, one_cpu = batch_rate(paths, 1, out, args.batched_fits)
+    two_s, _, _, two_cpu = batch_rate(paths, 2, out, args.batched_fits)
     last_s, _ = stages_alone(paths)
     alone_s = (first_s + last_s) / 2
     load_after = os.getloadavg()
     stage = {k: sum(getattr(s, f"{k}_s") for s in summaries) for k in ("phase", "aperture", "unwrap", "fit")}
     total = sum(stage.values()) or 1.0
-    print(f"campaign: {len(paths)} recordings, {sets} sets (256 x 256, 5 frames each), cores: {os.cpu_count()}")
+    print(f"campaign: {len(paths)} recordings, {sets} sets (256 x 256, 5 frames each), cores: {os.cpu_count()}"
+          + (", batched fits" if args.batched_fits else ""))
     print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f} (shared machine: ratios, not rates)")
     print(f"1 worker : {sets / one_s:7.2f} sets/s ({one_s:.2f} s)")
     print(f"2 workers: {sets / two_s:7.2f} sets/s ({two_s:.2f} s), {one_s / two_s:.2f}x the 1-worker rate "
@@ -126,6 +189,14 @@ def main() -> None:
     print(f"stages alone, one process: {1e3 * alone_s / alone_sets:.1f} ms/set (mean of {1e3 * first_s / alone_sets:.1f}"
           f" before and {1e3 * last_s / alone_sets:.1f} after the campaigns); batch on 1 worker "
           f"{1e3 * one_s / sets:.1f} ms/set, {one_s / sets / (alone_s / alone_sets):.2f}x (target <= 1.5x)")
+    for label, use, wall in (("1 worker ", one_cpu, one_s), ("2 workers", two_cpu, two_s)):
+        print(f"CPU s, {label} ({wall:.2f} s wall): client main thread {use.client_main:.2f}, client's other "
+              f"threads (scheduler, comms) {use.client_other:.2f}, workers "
+              + " + ".join(f"{w:.2f}" for w in use.workers) + f", nannies {use.nannies:.2f}; workers busy "
+              + ", ".join(f"{100 * b:.0f} %" for b in use.busy) + " of the wall time")
+    bound = 2 * sum(one_cpu.workers) / (sum(two_cpu.workers) + two_cpu.client_main + two_cpu.client_other)
+    print(f"from the CPU times: on 2 free cores the 2-worker run could reach {bound:.2f}x (twice the 1-worker "
+          "run's worker CPU over all the 2-worker run's CPU: workers, client, scheduler)")
     print("share of the workers' stage time: " + ", ".join(f"{k} {100 * v / total:.0f} %" for k, v in stage.items())
           + " (aperture includes the fitter builds of each recording's first set)")
 

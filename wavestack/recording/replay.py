@@ -20,7 +20,7 @@ import numpy as np
 from wavestack.config import StationConfig, parse_station_config
 from wavestack.pipeline import InputError
 from wavestack.recording.reader import RecordingDamaged, RecordingReader
-from wavestack.station import InterferometerOutcome, SlopeOutcome, build_processor, json_ready
+from wavestack.station import InterferometerOutcome, SetBatch, SlopeOutcome, build_processor, json_ready
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +98,7 @@ def recorded_config(reader: RecordingReader, path: str | Path) -> StationConfig:
 
 
 def replay(reader: RecordingReader, config: StationConfig, *,
-           same_settings: bool) -> Iterator[ReplayedResult | SkippedSet]:
+           same_settings: bool, batched_fits: bool = False) -> Iterator[ReplayedResult | SkippedSet]:
     """Recompute every intact recorded set; a damaged one is yielded as a :class:`SkippedSet`.
 
     Parameters
@@ -108,6 +108,9 @@ def replay(reader: RecordingReader, config: StationConfig, *,
         Settings to process with (the recorded ones, or others).
     same_settings : bool
         Reproduce each result's live fitter (the recorded settings).
+    batched_fits : bool
+        Fit the maps that share a fitter in batches (:class:`~wavestack.station.SetBatch`): the same
+        results to the float32 operator's rounding (~1e-6 waves), not bit for bit the live ones.
 
     Yields
     ------
@@ -121,6 +124,7 @@ def replay(reader: RecordingReader, config: StationConfig, *,
                          "(expected beside 'index')")
     rows = {int(i): k for k, i in enumerate(recorded.get("index", []))}
     processor = build_processor(config, background_builds=False)
+    batch: SetBatch[_Read] = SetBatch(processor, batched=batched_fits)
     gap = False
     rows_lost = any(d.part == "results" for d in reader.damage)
     try:
@@ -129,6 +133,7 @@ def replay(reader: RecordingReader, config: StationConfig, *,
             try:
                 frames = reader.read_set(position)
             except RecordingDamaged as error:
+                yield from (_compared(read, outcome, recorded) for read, outcome in batch.flush())
                 yield SkippedSet(position, set_index, str(error))
                 gap = True
                 continue
@@ -136,19 +141,38 @@ def replay(reader: RecordingReader, config: StationConfig, *,
             method = None
             if same_settings and row is not None and recorded["fitter"][row]:
                 method = str(recorded["fitter"][row])
-            processed = processor.process([f.pixels for f in frames], fitter_method=method)
-            live = None if row is None or not recorded["valid"][row] else np.asarray(recorded["coefficients"][row])
-            difference = None
-            found = processed.coefficients_waves
-            if live is not None and found is not None and live.shape == found.shape:
-                difference = float(np.sqrt(np.mean((found - live) ** 2)))
-            live_pv = None
-            if live is not None and "residual_pv" in recorded:  # a column since results carry it
-                live_pv = float(recorded["residual_pv"][row])
-            pv_difference = None
-            if live_pv is not None and processed.valid:
-                pv_difference = float(processed.residual_pv - live_pv)
-            yield ReplayedResult(set_index, tuple(f.frame_id for f in frames), processed, live, difference,
-                                 live_pv, pv_difference, gap or (rows_lost and row is None))
+            read = _Read(set_index, tuple(f.frame_id for f in frames), row, gap or (rows_lost and row is None))
+            done = batch.add([f.pixels for f in frames], read, fitter_method=method)
+            yield from (_compared(r, outcome, recorded) for r, outcome in done)
+        yield from (_compared(read, outcome, recorded) for read, outcome in batch.flush())
     finally:
         processor.close()
+
+
+@dataclass(frozen=True)
+class _Read:
+    """What replay keeps of a set while it waits for its fit."""
+
+    index: int
+    frame_ids: tuple[int, ...]
+    row: int | None
+    affected_by_damage: bool
+
+
+def _compared(read: _Read, processed: InterferometerOutcome | SlopeOutcome,
+              recorded: dict[str, np.ndarray]) -> ReplayedResult:
+    """A recomputed outcome beside its recorded result row."""
+    row = read.row
+    live = None if row is None or not recorded["valid"][row] else np.asarray(recorded["coefficients"][row])
+    difference = None
+    found = processed.coefficients_waves
+    if live is not None and found is not None and live.shape == found.shape:
+        difference = float(np.sqrt(np.mean((found - live) ** 2)))
+    live_pv = None
+    if live is not None and "residual_pv" in recorded:  # a column since results carry it
+        live_pv = float(recorded["residual_pv"][row])
+    pv_difference = None
+    if live_pv is not None and processed.valid:
+        pv_difference = float(processed.residual_pv - live_pv)
+    return ReplayedResult(read.index, read.frame_ids, processed, live, difference, live_pv, pv_difference,
+                          read.affected_by_damage)

@@ -20,7 +20,7 @@ from wavestack.station.counters import Counters, FrameCounts, SetCounts
 from wavestack.station.cycle import CycleRecord, ProcessorOutcome, ResultSink, make_result, with_output
 from wavestack.station.devices import StationDevices, configure_camera, open_station_devices, phase_steps_rad
 from wavestack.station.fitter_cache import FALLBACK_METHOD, FitterCache, FitterChoice
-from wavestack.station.interferometer import CARRIER_REFRESH_SETS, InterferometerOutcome, SetProcessor
+from wavestack.station.interferometer import CARRIER_REFRESH_SETS, InterferometerOutcome, PreparedSet, SetProcessor
 from wavestack.station.live_view import LiveSnapshot, LiveStats, counter_lines, render_live_view
 from wavestack.station.outputs import PlcOutput, start_up_hold
 from wavestack.station.results import (
@@ -35,6 +35,7 @@ from wavestack.station.results import (
     TruthErrors,
     json_ready,
 )
+from wavestack.station.set_batch import GROUP_SETS, SetBatch
 from wavestack.station.shack_hartmann import (
     MODAL,
     LensletSlopes,
@@ -50,9 +51,9 @@ from wavestack.station.truth import TruthCheck
 __all__ = [
     "ApertureAction", "ApertureEvent", "AperturePhase", "ApertureRecord", "ApertureState", "CARRIER_REFRESH_SETS",
     "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
-    "FitterChoice", "FitterDiagnostics", "FrameCounts", "Heartbeat", "InterferometerOutcome", "LensletSlopes",
-    "LiveSnapshot", "LiveStats", "MODAL", "OutputRecord", "PhaseStepSource", "PlcOutput", "ProcessorOutcome",
-    "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetCounts", "SetProcessor",
+    "FitterChoice", "FitterDiagnostics", "FrameCounts", "GROUP_SETS", "Heartbeat", "InterferometerOutcome", "LensletSlopes",
+    "LiveSnapshot", "LiveStats", "MODAL", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet", "ProcessorOutcome",
+    "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetBatch", "SetCounts", "SetProcessor",
     "SlopeOutcome", "SlopeProcessor", "Station", "StationDevices", "StationResult", "StationSummary", "TruthCheck",
     "TruthErrors", "build_processor", "coefficient_errors", "configure_camera", "confirm", "counter_lines",
     "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view",

@@ -135,6 +135,37 @@ class InterferometerOutcome:
         return self.aperture.mask if self.aperture_changed and self.aperture is not None else None
 
 
+@dataclass(frozen=True, eq=False)
+class PreparedSet:
+    """A set through phase, aperture and unwrap, waiting for its fit (:meth:`SetProcessor.prepare`).
+
+    Attributes
+    ----------
+    outcome : InterferometerOutcome or None
+        The set's outcome when it is invalid before any fit (phase, aperture); None otherwise.
+    waves : ndarray, shape (rows, cols) decimated by ``fit_decimation``, or None
+        The unwrapped map to fit, waves (float32), NaN outside the aperture.
+    choice : FitterChoice or None
+        The fitter to fit it with (sets sharing ``choice.fitter`` may be fitted in one batch).
+    aperture : Aperture or None
+    aperture_changed : bool
+    unwrap_path : str or None
+    timings_s : dict
+        Seconds of the phase, aperture and unwrap stages.
+    choose_s : float
+        Seconds spent choosing (or building) the fitter, counted in the fit stage.
+    """
+
+    outcome: InterferometerOutcome | None
+    waves: NDArray[np.float32] | None = None
+    choice: FitterChoice | None = None
+    aperture: Aperture | None = None
+    aperture_changed: bool = False
+    unwrap_path: str | None = None
+    timings_s: dict[str, float] = field(default_factory=dict)
+    choose_s: float = 0.0
+
+
 class SetProcessor:
     """Turns sets of frames into fitted coefficients, keeping state between sets.
 
@@ -168,7 +199,7 @@ class SetProcessor:
 
     def process(self, frames: Sequence[NDArray[np.generic]], *,
                 fitter_method: str | None = None) -> InterferometerOutcome:
-        """Process one set (psi) or one frame (carrier).
+        """Process one set (psi) or one frame (carrier): :meth:`prepare`, the fit, :meth:`finish`.
 
         Parameters
         ----------
@@ -189,6 +220,38 @@ class SetProcessor:
         ValueError
             A set of the wrong length or of frames of different shapes (a wiring error).
         """
+        prepared = self.prepare(frames, fitter_method=fitter_method)
+        if prepared.outcome is not None:
+            return prepared.outcome
+        assert prepared.choice is not None and prepared.waves is not None
+        tick = time.perf_counter()
+        try:
+            fit: FitResult | InvalidFrame = prepared.choice.fitter.fit(prepared.waves, nan_policy="omit", residual=True)
+        except InvalidFrame as error:
+            fit = error
+        return self.finish(prepared, fit, time.perf_counter() - tick)
+
+    def prepare(self, frames: Sequence[NDArray[np.generic]], *, fitter_method: str | None = None) -> PreparedSet:
+        """The stages before the fit: phase, aperture, unwrap, and the choice of fitter.
+
+        Parameters and errors as for :meth:`process`. The processor's state (aperture, unwrapper,
+        carrier) moves on as :meth:`process` moves it; the next set may be prepared before this one
+        is finished, except with the carrier method, whose next set depends on this set's fit (an
+        invalid fit makes the next frame look for its carrier afresh).
+
+        Returns
+        -------
+        PreparedSet
+            ``outcome`` set when the set is invalid already (nothing to fit); else the map to fit.
+
+        Example
+        -------
+        One set through the split, as :meth:`process` runs it::
+
+            prepared = processor.prepare(frames)
+            fit = prepared.choice.fitter.fit(prepared.waves, nan_policy="omit", residual=True)
+            outcome = processor.finish(prepared, fit, fit_s=0.0)
+        """
         expected = self.settings.frames_per_set
         if len(frames) != expected:
             raise ValueError(f"expected {expected} frame(s) per set, got {len(frames)}")
@@ -197,13 +260,13 @@ class SetProcessor:
         try:
             wrapped, signal, erode_px = self._phase(frames)
         except ValueError as error:  # no fringes, no carrier, degenerate steps
-            return self._invalid(f"phase: {error}", timings_s=timings)
+            return PreparedSet(self._invalid(f"phase: {error}", timings_s=timings))
         timings["phase"] = time.perf_counter() - tick
 
         tick = time.perf_counter()
         changed, problem = self._update_aperture(signal, erode_px, fitter_method)
         if problem is not None:
-            return self._invalid(f"aperture: {problem}", timings_s=timings)
+            return PreparedSet(self._invalid(f"aperture: {problem}", timings_s=timings))
         aperture = self._apertures.current
         assert aperture is not None
         timings["aperture"] = time.perf_counter() - tick
@@ -220,20 +283,42 @@ class SetProcessor:
         assert choice is not None
         if fitter_method is not None and choice.kind != fitter_method:
             choice = self.fitters.use_method(fitter_method)
-        try:
-            fit = choice.fitter.fit(waves, nan_policy="omit", residual=True)
-        except InvalidFrame as error:
-            return self._invalid(f"fit: {error}", choice=choice, aperture=aperture, aperture_changed=changed,
-                                unwrap_path=unwrapped.path, timings_s=timings)
-        timings["fit"] = time.perf_counter() - tick
+        return PreparedSet(None, waves, choice, aperture, changed, unwrapped.path, timings,
+                           choose_s=time.perf_counter() - tick)
+
+    def finish(self, prepared: PreparedSet, fit: FitResult | InvalidFrame, fit_s: float) -> InterferometerOutcome:
+        """The outcome of a prepared set from its fit (or the fit's refusal).
+
+        Parameters
+        ----------
+        prepared : PreparedSet
+            From :meth:`prepare` of this processor, with nothing to fit when ``prepared.outcome`` is set.
+        fit : FitResult or InvalidFrame
+            ``prepared.choice.fitter``'s fit of ``prepared.waves`` (``nan_policy="omit"``,
+            ``residual=True``), alone or in a batch (``Fitter.fit_many``); the error when it refused.
+        fit_s : float
+            Seconds the fit took (a batch's share), for ``timings_s["fit"]``.
+
+        Returns
+        -------
+        InterferometerOutcome
+            Invalid when the fit was refused or its residual exceeds ``max_residual_waves``.
+        """
+        if prepared.outcome is not None:
+            return prepared.outcome
+        timings = dict(prepared.timings_s)
+        context = dict(choice=prepared.choice, aperture=prepared.aperture, aperture_changed=prepared.aperture_changed,
+                       unwrap_path=prepared.unwrap_path, timings_s=timings)
+        if isinstance(fit, InvalidFrame):
+            return self._invalid(f"fit: {fit}", **context)
+        timings["fit"] = prepared.choose_s + fit_s
         if not fit.residual_rms <= self.settings.max_residual_waves:  # unwrapping errors, a bad frame
             return self._invalid(f"fit: residual {fit.residual_rms:.3g} waves rms exceeds "
-                                f"max_residual_waves = {self.settings.max_residual_waves:g}",
-                                choice=choice, aperture=aperture, aperture_changed=changed,
-                                unwrap_path=unwrapped.path, timings_s=timings)
+                                 f"max_residual_waves = {self.settings.max_residual_waves:g}", **context)
         assert fit.residual_pv is not None  # asked for above
-        return InterferometerOutcome(True, None, fit.coefficients, fit, choice, aperture, changed, unwrapped.path,
-                                     waves, timings, fit.residual_pv)
+        return InterferometerOutcome(True, None, fit.coefficients, fit, prepared.choice, prepared.aperture,
+                                     prepared.aperture_changed, prepared.unwrap_path, prepared.waves, timings,
+                                     fit.residual_pv)
 
     def fit_map(self, waves: NDArray[np.float64], choice: FitterChoice) -> FitResult:
         """Fit a full-resolution map with a given fitter (the simulator's truth, for comparison)."""
