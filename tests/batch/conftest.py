@@ -155,18 +155,20 @@ def _comparable(values: dict[str, object]) -> dict[str, object]:
 _REPLAY_DRIVER = textwrap.dedent("""
     import contextlib, io, json, sys
     from wavestack.cli import main
-    for name in sys.argv[1:]:
+    flags = json.loads(sys.argv[1])
+    for name in sys.argv[2:]:
         out = io.StringIO()
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
-            main(["replay", name, "--json"])
+            main(["replay", name, "--json", *flags])
         print(json.dumps({"file": name, "out": out.getvalue()}), flush=True)
 """)
 
 
-def _replay_by_cli(paths: Sequence[Path]) -> dict[str, list[dict[str, object]]]:
+def _replay_by_cli(paths: Sequence[Path], *flags: str) -> dict[str, list[dict[str, object]]]:
     """``wavestack replay --json`` of each file, in one child process (the command's one BLAS thread,
     as the batch's workers have), as comparable rows: the reference the batch must equal."""
-    done = subprocess.run([sys.executable, "-c", _REPLAY_DRIVER, *map(str, paths)], capture_output=True, text=True,
+    done = subprocess.run([sys.executable, "-c", _REPLAY_DRIVER, json.dumps(flags), *map(str, paths)],
+                          capture_output=True, text=True,
                           timeout=RUN_TIMEOUT_S)
     assert done.returncode == 0, done.stderr
     found = {}
