@@ -124,7 +124,8 @@ class FitterDiagnostics:
         How frames are projected: ``"moments"`` (separable Legendre moments, no operator) or
         ``"operator"`` (a stored N x M operator).
     moment_strips : int or None
-        Moments only: strips the fitted pixels were cut into.
+        Moments only: boxes the fitted pixels were cut into (row strips, each cut again where it
+        has a column without a fitted pixel, e.g. on both sides of a central hole).
     moment_amplification : float or None
         Moments only: the largest coefficient row sum, the factor by which float64 rounding of
         the moments reaches the coefficients (relative error about this times 1.1e-16).
