@@ -37,6 +37,8 @@ def _parse() -> argparse.Namespace:
     parser.add_argument("--max-operator-gb", type=float, default=1.0,
                         help="skip the operator path and lstsq where the float64 design exceeds this (1 GB)")
     parser.add_argument("--threads", type=int, default=1, help="BLAS threads (1)")
+    parser.add_argument("--annulus", type=float, default=0.35,
+                        help="obscuration of the annulus method's rows, at the smallest size (0.35; 0 skips them)")
     parser.add_argument("--memory-child", type=int, nargs=2, metavar=("SIZE", "MODES"), help=argparse.SUPPRESS)
     return parser.parse_args()
 
@@ -130,6 +132,29 @@ def bench_size(size: int) -> None:
         del moments, operator
 
 
+def bench_annulus(size: int, obscuration: float) -> None:
+    """The ``annulus`` method on the disk of :func:`make_frame` less a central hole: moments vs operator."""
+    mask, frame = make_frame(size)
+    rows, cols = np.indices(mask.shape, dtype=np.float32)
+    mask &= np.hypot(rows - (size - 1) / 2.0, cols - (size - 1) / 2.0) >= obscuration * 0.4375 * size
+    del rows, cols
+    frame = np.where(mask, frame, np.float32(np.nan))
+    print(f"\n## annulus method, {size} x {size}, obscuration {obscuration}: {int(mask.sum())} valid pixels\n")
+    print("| modes | floor ms | moments ms | operator ms | moments / floor | operator / moments | boxes |")
+    print("|---:|---:|---:|---:|---:|---:|---:|")
+    for modes in ARGS.modes:
+        moments = build_fitter(mask, method="annulus", modes=modes, dtype=np.float32)
+        actions = {"floor": lambda: frame.sum(), "moments": lambda: moments.fit(frame)}
+        if 8 * int(mask.sum()) * modes / 1e9 <= ARGS.max_operator_gb:
+            operator = build_fitter(mask, method="annulus", modes=modes, dtype=np.float32, refit="operator")
+            actions["operator"] = lambda: operator.fit(frame)
+        times = interleaved(actions, ARGS.repeats)
+        op = times.get("operator", float("nan"))
+        print(f"| {modes} | {times['floor'] * 1e3:.3f} | {times['moments'] * 1e3:.2f} | {op * 1e3:.2f} | "
+              f"{times['moments'] / times['floor']:.1f} | {op / times['moments']:.1f} | "
+              f"{moments.diagnostics.moment_strips} ({moments.refit}) |")
+
+
 def _resident_mib(field: str) -> float:
     """``VmRSS`` (now) or ``VmHWM`` (peak since the last reset) of this process, MiB (Linux)."""
     with open("/proc/self/status") as status:
@@ -174,6 +199,8 @@ def main() -> int:
           f"({ARGS.lstsq_repeats} lstsq), load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}")
     for size in ARGS.sizes:
         bench_size(size)
+    if ARGS.annulus > 0:
+        bench_annulus(min(ARGS.sizes), ARGS.annulus)
     print()
     child = [sys.executable, __file__, "--threads", str(ARGS.threads), "--memory-child", str(max(ARGS.sizes)), "231"]
     sys.stdout.flush()

@@ -4,6 +4,7 @@ terms.
 
 from __future__ import annotations
 
+from .annulus import Obscuration, annulus_obscuration
 from .auto import AUTO, AUTO_MAX_NOISE_GAIN
 from .build import MAX_MODES, available_methods, build_fitter, check_basis_size
 from .conditioning import gram_condition, noise_gain, normalised_gram
@@ -37,9 +38,11 @@ __all__ = [
     "MAX_GRAM_CONDITION",
     "METHODS",
     "MappingOptions",
+    "Obscuration",
     "PhysicalTerms",
     "Pupil",
     "Samples",
+    "annulus_obscuration",
     "available_methods",
     "check_basis_size",
     "build_canonical_map",

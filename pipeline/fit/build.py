@@ -32,7 +32,9 @@ from numpy.typing import DTypeLike, NDArray
 from .._checks import is_integer, one_of
 from ..aperture import Aperture, Topology, UnsupportedAperture
 from ..formats.limits import format_bytes, memory_budget_bytes
-from ..zernike import default_normalisation, mode_list, normalisation_factor
+from ..zernike import default_normalisation, mode_list
+from .annulus import annulus_obscuration, check_obscuration, with_obscuration_source
+from .basis_meaning import fit_basis
 from .auto import AUTO, BuildOne, advised_error, build_auto
 from .coefficient_maps import CoefficientMaps, coefficient_maps
 from .legendre_moments import MAX_AMPLIFICATION
@@ -43,7 +45,7 @@ from .methods import METHODS, MappingOptions, Samples, method_columns
 from .normal_equations import IllConditionedBasis, NormalEquations
 from .orthonormal import orthonormalise
 from .physical_terms import physical_term_basis, physical_term_names
-from .results import FitBasis, FitterDiagnostics, Pupil
+from .results import FitterDiagnostics, Pupil
 from .sampling import aperture_of, fit_mask_of, pupil_of, samples_of
 
 if TYPE_CHECKING:
@@ -116,9 +118,13 @@ def check_basis_size(valid_pixels: int, modes: int, max_bytes: int | None = None
 
 
 def _check_arguments(
-    method: str, modes: int, ordering: str, dtype: np.dtype, fallback: str | None
+    method: str, modes: int, ordering: str, dtype: np.dtype, fallback: str | None, obscuration: float | None
 ) -> None:
     one_of(method, "method", (AUTO, *METHODS), voice="expected")
+    if obscuration is not None:
+        check_obscuration(obscuration)
+        if method != "annulus":
+            raise ValueError(f"obscuration: only the 'annulus' method takes an obscuration ratio, got method {method!r}")
     if not is_integer(modes) or modes < 1:
         raise ValueError(f"modes: expected a positive integer, got {modes!r}")
     one_of(ordering, "ordering", _ORDERINGS, voice="expected")
@@ -160,6 +166,7 @@ def build_fitter(
     fallback: str | None = None,
     fit_mask: NDArray | None = None,
     refit: str = "auto",
+    obscuration: float | None = None,
 ) -> Fitter:
     """Precompute everything needed to refit frames on one aperture.
 
@@ -167,13 +174,16 @@ def build_fitter(
     ----------
     aperture_or_mask : Aperture or ndarray of shape (rows, cols)
         The aperture, or a mask (non-zero = valid) to build it from.
-    method : {"circle", "qr", "conformal", "csf-qcm", "auto"}
+    method : {"circle", "qr", "annulus", "conformal", "csf-qcm", "auto"}
         ``auto``: ``circle`` where the circle basis is well conditioned on the aperture (noise
         gain at most ``AUTO_MAX_NOISE_GAIN``), else ``csf-qcm`` (``qr`` for an aperture no map
         can handle); ``diagnostics.method`` is the method chosen and
         ``diagnostics.method_reason`` says why (:mod:`wavestack.pipeline.fit.auto`).
         ``circle``: Zernike polynomials over the pupil circle. ``qr``: the same modes
         orthonormalised over the samples; ``FitResult.circle_coefficients`` converts back.
+        ``annulus``: annular Zernike polynomials (Mahajan), unit RMS over the annulus
+        ``obscuration <= rho <= 1`` of the pupil circle, on the pixels themselves
+        (``basis.annular_obscuration`` is the ratio used).
         ``csf-qcm``: Zernike (or annular Zernike) polynomials on the CSF-QCM map of the aperture
         onto the unit disk (or a concentric annulus). ``conformal``: the same on a discrete
         conformal map (the baseline).
@@ -184,14 +194,16 @@ def build_fitter(
         Index convention (see :mod:`wavestack.pipeline.zernike.indices`).
     pupil : Pupil or (cx, cy, r), optional
         The unit disk in pixels, cx a column and cy a row coordinate. Default: the aperture's
-        minimum enclosing circle through the outermost valid pixel centres. Valid pixels outside
+        minimum enclosing circle through the outermost valid pixel centres (also the outer
+        circle of ``annulus``). Valid pixels outside
         a given pupil are left out of the fit (counted in ``diagnostics``). For mapped methods
         it only normalises the physical piston/tilt/power terms.
     dtype : {numpy.float32, numpy.float64}
         Type of the stored operator and the per-frame product; the factorisations are float64.
     normalisation : {"rms", "edge"}, optional
         Output normalisation of Zernike coefficients; default: the ordering's own (unit RMS for
-        Noll and ANSI, unit edge value for Fringe). Annular terms are always unit RMS.
+        Noll and ANSI, unit edge value for Fringe). Annular terms (``annulus``, and ``csf-qcm`` on
+        an annulus) are always unit RMS over their annulus.
     remove : {"ptt", "pttp"}, optional
         Fit and remove piston and tilt (and power) in physical coordinates before the fit; they
         are reported in ``FitResult.removed``.
@@ -218,7 +230,13 @@ def build_fitter(
         (``diagnostics.moment_amplification`` at most 3e4), else by a stored operator (always
         for the mapped methods, whose columns are not polynomials). ``moments`` insists (raises
         where precision would be lost), ``operator`` keeps the operator. ``diagnostics.refit``
-        says which was built.
+        says which was built. ``annulus`` is served like ``circle``.
+    obscuration : float, optional
+        ``annulus`` only: the obscuration ratio (inner over outer radius, 0 < obscuration < 1).
+        Default: measured, the largest circle concentric with the pupil that holds no valid
+        pixel centre (:func:`~wavestack.pipeline.fit.annulus.annulus_obscuration`); an aperture
+        without a hole around the pupil centre is refused then. Pixels inside a given inner
+        circle are fitted all the same (the polynomials are evaluated there as they are).
 
     Returns
     -------
@@ -227,8 +245,9 @@ def build_fitter(
     Raises
     ------
     ValueError
-        For an invalid argument (the message names it), an empty aperture, or a pupil that
-        misses the aperture.
+        For an invalid argument (the message names it), an empty aperture, a pupil that
+        misses the aperture, or ``annulus`` without an obscuration on an aperture without a
+        central hole.
     UnsupportedAperture
         For a mapped method on an aperture with several components or holes, without fallback.
     IllConditionedBasis
@@ -253,7 +272,7 @@ def build_fitter(
     array([0.  , 0.  , 0.  , 0.25, 0.  , 0.  ])
     """
     dtype = np.dtype(dtype)
-    _check_arguments(method, modes, ordering, dtype, fallback)
+    _check_arguments(method, modes, ordering, dtype, fallback, obscuration)
     normalisation = normalisation or default_normalisation(ordering)
     if normalisation not in ("rms", "edge"):
         raise ValueError(f"normalisation: expected 'rms' or 'edge', got {normalisation!r}")
@@ -265,7 +284,7 @@ def build_fitter(
     )
     settings = dict(
         modes=int(modes), ordering=ordering, pupil=pupil, dtype=dtype,
-        normalisation=normalisation, remove=remove, options=options, refit=refit,
+        normalisation=normalisation, remove=remove, options=options, refit=refit, obscuration=obscuration,
     )
     check_basis_size(0, int(modes))  # the mode bound; the operator's memory is checked where one is built
     aperture = aperture_of(aperture_or_mask)
@@ -312,18 +331,20 @@ def _build(
     options: MappingOptions,
     fit_mask: NDArray[np.bool_] | None,
     refit: str,
+    obscuration: float | None,
 ) -> Fitter:
     started = time.perf_counter()
     resolved_pupil = pupil_of(aperture, pupil)
     mode_pairs = mode_list(ordering, modes)
+    annular = annulus_obscuration(aperture, resolved_pupil, obscuration, fit_mask) if method == "annulus" else None
+    ratio = None if annular is None else annular.ratio
     if method in MOMENT_METHODS and refit != "operator":
-        output_normalisation, scale = _output_scale(mode_pairs, normalisation, None)
-        basis = _basis_of(method, ordering, output_normalisation, mode_pairs, resolved_pupil, None)
+        basis, scale = fit_basis(method, ordering, normalisation, mode_pairs, resolved_pupil, ratio)
         fitter = build_moment_fitter(
             aperture, MomentRequest(method, basis, scale, remove, dtype, pupil is not None, fit_mask), started
         )
         if fitter is not None:
-            return fitter
+            return with_obscuration_source(fitter, annular)
         if refit == "moments":
             raise ValueError(f"refit: 'moments' would lose precision on this aperture (coefficient amplification "
                              f"above {MAX_AMPLIFICATION:g} even on the finest strips); expected refit='auto' or "
@@ -333,18 +354,18 @@ def _build(
     timings = {"aperture": time.perf_counter() - started}
 
     tick = time.perf_counter()
-    columns = method_columns(method, aperture, samples, mode_pairs, options)
+    columns = method_columns(method, aperture, samples, mode_pairs, options, ratio)
     timings["basis"] = time.perf_counter() - tick
     if columns.mapping is not None:
         timings.update({f"map_{stage}": seconds for stage, seconds in columns.mapping.timings.items()})
-    output_normalisation, scale = _output_scale(mode_pairs, normalisation, columns.mapping)
+    ratio = columns.mapping.r_in if columns.mapping is not None else ratio
+    basis, scale = fit_basis(method, ordering, normalisation, mode_pairs, resolved_pupil, ratio)
 
     tick = time.perf_counter()
     factors = _factorise(columns.values, method, scale, samples, remove, dtype)
     timings["factorise"] = time.perf_counter() - tick
     timings["total"] = time.perf_counter() - started
 
-    basis = _basis_of(method, ordering, output_normalisation, mode_pairs, resolved_pupil, columns.mapping)
     diagnostics = FitterDiagnostics(
         method=method,
         topology=aperture.topology.value,
@@ -358,7 +379,7 @@ def _build(
     )
     logger.info("built %s fitter: %d modes on %d samples, kappa(G)=%.3g, %.3f s",
                 method, len(mode_pairs), samples.x.size, factors.maps.kappa, timings["total"])
-    return Fitter(
+    return with_obscuration_source(Fitter(
         aperture=aperture,
         projection=OperatorProjection(aperture.shape, samples.flat_index, factors.operator),
         equations=factors.equations,
@@ -371,21 +392,7 @@ def _build(
         removal=remove,
         removal_transform=factors.removal_transform,
         mapping=columns.mapping,
-    )
-
-
-def _output_scale(
-    mode_pairs: list[tuple[int, int]], normalisation: str, mapping: CanonicalMap | None
-) -> tuple[str, NDArray[np.float64]]:
-    """The normalisation of the output coefficients, and each mode's factor from unit RMS to it."""
-    annular = mapping is not None and mapping.r_in is not None
-    # Annular terms are unit RMS over the annulus; the edge normalisation is a circle notion.
-    output_normalisation = "rms" if annular else normalisation
-    scale = np.array(
-        [normalisation_factor(n, m, "rms") / normalisation_factor(n, m, output_normalisation)
-         for n, m in mode_pairs]
-    )
-    return output_normalisation, scale
+    ), annular)
 
 
 @dataclass(frozen=True)
@@ -425,23 +432,3 @@ def _factorise(
 
 def _inverse(triangular: NDArray[np.float64]) -> NDArray[np.float64]:
     return scipy.linalg.solve_triangular(triangular, np.eye(triangular.shape[0]), lower=False)
-
-
-def _basis_of(
-    method: str,
-    ordering: str,
-    output_normalisation: str,
-    mode_pairs: list[tuple[int, int]],
-    pupil: Pupil,
-    mapping: CanonicalMap | None,
-) -> FitBasis:
-    """What the fitter's coefficients mean."""
-    return FitBasis(
-        method=method,
-        ordering=ordering,
-        normalisation="aperture-rms" if method == "qr" else output_normalisation,
-        modes=tuple(mode_pairs),
-        first_index=0 if ordering == "ansi" else 1,
-        pupil=pupil,
-        annular_obscuration=mapping.r_in if mapping is not None else None,
-    )

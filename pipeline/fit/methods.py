@@ -3,6 +3,9 @@
 * ``circle``: Zernike circle polynomials over the pupil circle.
 * ``qr``: the same columns; the fitter reports their orthonormalised form (Gram-Schmidt over the
   samples, Swantner & Chow 1994) and converts back.
+* ``annulus``: annular Zernike polynomials (Mahajan 1981) over the annulus ``eps <= rho <= 1`` of
+  the pupil circle, on the pixels themselves (``eps`` given or measured,
+  :mod:`wavestack.pipeline.fit.annulus`).
 * ``csf-qcm``: Zernike (disk) or annular Zernike (annulus, obscuration ``r_in``) polynomials at
   the samples' images under the CSF-QCM map (:mod:`wavestack.pipeline.mapping.qcm`).
 * ``conformal``: the same under a discrete conformal map (:mod:`wavestack.pipeline.mapping.conformal`),
@@ -21,7 +24,7 @@ from ..aperture import Aperture
 from ..mapping import LAPLACIANS, MAX_TARGET_VERTICES, CanonicalMap, conformal_map, csf_qcm_map
 from ..zernike import annular_zernike_basis, zernike_basis
 
-METHODS = ("circle", "qr", "conformal", "csf-qcm")
+METHODS = ("circle", "qr", "annulus", "conformal", "csf-qcm")
 MAPPED_METHODS = ("conformal", "csf-qcm")
 
 
@@ -134,16 +137,19 @@ def method_columns(
     samples: Samples,
     modes: list[tuple[int, int]],
     options: MappingOptions,
+    obscuration: float | None = None,
 ) -> MethodColumns:
     """Basis columns of ``method`` on the samples.
 
     Parameters
     ----------
-    method : {"circle", "qr", "conformal", "csf-qcm"}
+    method : {"circle", "qr", "annulus", "conformal", "csf-qcm"}
     aperture : Aperture
     samples : Samples
     modes : list of (n, m)
     options : MappingOptions
+    obscuration : float, optional
+        ``annulus`` only (required there): the obscuration ratio ``eps``.
 
     Returns
     -------
@@ -158,6 +164,10 @@ def method_columns(
     """
     if method in ("circle", "qr"):
         return MethodColumns(zernike_basis(modes, samples.x, samples.y, normalisation="rms"))
+    if method == "annulus":
+        if obscuration is None:
+            raise ValueError("obscuration: expected the obscuration ratio of the annulus method, got None")
+        return MethodColumns(annular_zernike_basis(modes, samples.x, samples.y, obscuration=obscuration))
     if method in MAPPED_METHODS:
         mapping = canonical_map(aperture, method, options)
         return MethodColumns(mapped_columns(mapping, samples, modes), mapping)

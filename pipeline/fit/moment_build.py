@@ -4,9 +4,11 @@ The work done once per aperture, with nothing of size N x M (N fitted pixels, M 
 
 1. the fitted pixels as a mask (the aperture's or the given fit mask, less the pixels outside a
    user-given pupil), found in row blocks;
-2. strips of that mask and each strip's Legendre coefficients of the basis and physical-term
-   columns (:mod:`wavestack.pipeline.fit.legendre_moments`), with the strip count doubled until
-   the coefficients' amplification is at most ``MAX_AMPLIFICATION``;
+2. strips of that mask, each cut at the columns where it has no fitted pixel (the two sides of
+   a central hole become two boxes, so no box spans the hole, where annular terms of high degree
+   grow fast), and each box's Legendre coefficients of the basis and physical-term columns
+   (:mod:`wavestack.pipeline.fit.legendre_moments`), with the strip count doubled until the
+   coefficients' amplification is at most ``MAX_AMPLIFICATION``;
 3. the Gram matrices from moments of each strip's mask, and CholeskyQR2 done on the
    coefficients (``T_Q = R^-T T_H``, twice), as :func:`~wavestack.pipeline.fit.orthonormal.orthonormalise`
    does on the pixel values: the columns come out orthonormal (unit RMS) on the fitted pixels.
@@ -29,13 +31,14 @@ from .legendre_moments import (
     MAX_AMPLIFICATION,
     ColumnFunction,
     MaskMoments,
+    Strip,
     amplification,
     column_coefficients,
     gram_of,
     strip_moments,
     strips_of,
 )
-from ..zernike import zernike_basis
+from ..zernike import annular_zernike_basis, zernike_basis
 from .coefficient_maps import coefficient_maps
 from .fitter import Fitter
 from .moment_projection import MomentProjection, MomentState
@@ -44,7 +47,7 @@ from .orthonormal import check_condition, cholesky_factor, factor_quality
 from .physical_terms import physical_term_basis
 from .results import FitBasis, FitterDiagnostics, Pupil
 
-MOMENT_METHODS = ("circle", "qr")  # the methods whose columns are polynomials in the pixel coordinates
+MOMENT_METHODS = ("circle", "qr", "annulus")  # the methods whose columns are polynomials in pixel coordinates
 
 logger = logging.getLogger(__name__)
 
@@ -118,6 +121,25 @@ def fitted_mask(
     return mask, excluded
 
 
+def boxes_of(mask: NDArray[np.bool_], count: int) -> list[Strip]:
+    """:func:`~wavestack.pipeline.fit.legendre_moments.strips_of`, each strip cut at the columns
+    where it has no fitted pixel: disjoint boxes, none spanning a gap of the mask.
+
+    Measured on a 400 px annulus at degree 20 with 64 strips, the coefficients' amplification
+    drops from 1.3e5 to 170 at obscuration 0.5, and from 1.1e13 to 2.1e4 at 0.9 (boxes spanning
+    the hole reach far outside the annulus, where annular terms grow like a Chebyshev polynomial
+    outside its interval). A mask without such gaps (a disk) keeps its strips.
+    """
+    boxes = []
+    for strip in strips_of(mask, count):
+        used = np.flatnonzero(mask[strip.row0:strip.row1, strip.col0:strip.col1].any(axis=0))
+        cuts = np.flatnonzero(np.diff(used) > 1)
+        starts, stops = np.r_[used[0], used[cuts + 1]], np.r_[used[cuts], used[-1]] + 1
+        boxes.extend(Strip(strip.row0, strip.row1, strip.col0 + int(a), strip.col0 + int(b))
+                     for a, b in zip(starts, stops))
+    return boxes
+
+
 def _coefficients(columns: ColumnFunction, strips: list, pupil: Pupil, degree: int) -> list[NDArray]:
     def to_unit(rows: NDArray, cols: NDArray) -> tuple[NDArray, NDArray]:
         return (cols - pupil.cx) / pupil.radius, (pupil.cy - rows) / pupil.radius
@@ -178,11 +200,11 @@ def build_moments(
     most = max(1, min(_MAX_STRIPS, rows // _MIN_STRIP_ROWS))
     started = time.perf_counter()
     count = 1  # the fewest strips whose basis coefficients alone pass (cheap: no Gram matrix)
-    strips = strips_of(mask, count)
+    strips = boxes_of(mask, count)
     coefficients = _coefficients(basis, strips, pupil, degree)
     while count < most and max(amplification(t) for t in coefficients) > MAX_AMPLIFICATION:
         count *= 2
-        strips = strips_of(mask, min(count, most))
+        strips = boxes_of(mask, min(count, most))
         coefficients = _coefficients(basis, strips, pupil, degree)
     seconds = time.perf_counter() - started
     while True:
@@ -193,7 +215,7 @@ def build_moments(
         if count >= most:
             return None
         count *= 2
-        strips = strips_of(mask, min(count, most))
+        strips = boxes_of(mask, min(count, most))
         coefficients = _coefficients(basis, strips, pupil, degree)
 
 
@@ -222,9 +244,10 @@ class MomentRequest:
 
     Attributes
     ----------
-    method : {"circle", "qr"}
+    method : {"circle", "qr", "annulus"}
     basis : FitBasis
-        What the coefficients mean (modes, ordering, normalisation, pupil).
+        What the coefficients mean (modes, ordering, normalisation, pupil, and for ``annulus``
+        the obscuration ratio of its annular Zernike columns).
     scale : ndarray, shape (M,)
         Each mode's factor from unit RMS to the output normalisation.
     remove : str or None
@@ -269,7 +292,10 @@ def build_moment_fitter(aperture: Aperture, request: MomentRequest, started: flo
     tick = time.perf_counter()
     degree = max(max(n for n, _ in modes), 0 if request.remove is None else (1 if request.remove == "ptt" else 2))
     terms = None if request.remove is None else partial(_physical_terms, request.remove)
-    factors = build_moments(mask, pupil, partial(_zernike_columns, modes), degree, request.method, terms)
+    columns = partial(_zernike_columns, modes)
+    if request.basis.annular_obscuration is not None:
+        columns = partial(annular_zernike_basis, modes, obscuration=request.basis.annular_obscuration)
+    factors = build_moments(mask, pupil, columns, degree, request.method, terms)
     if factors is not None:
         timings["basis"] = factors.basis_seconds
     timings["factorise"] = time.perf_counter() - tick - timings.get("basis", 0.0)

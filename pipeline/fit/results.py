@@ -71,8 +71,9 @@ class FitBasis:
     pupil : Pupil
         The unit disk in pixels.
     annular_obscuration : float or None
-        For a map onto an annulus: its inner radius, the obscuration ratio of the annular
-        Zernike terms the coefficients refer to; None for circle polynomials.
+        The obscuration ratio of the annular Zernike terms the coefficients refer to: the
+        ``annulus`` method's, or for a map onto an annulus its inner radius; None for circle
+        polynomials.
     """
 
     method: str
@@ -123,10 +124,14 @@ class FitterDiagnostics:
         How frames are projected: ``"moments"`` (separable Legendre moments, no operator) or
         ``"operator"`` (a stored N x M operator).
     moment_strips : int or None
-        Moments only: strips the fitted pixels were cut into.
+        Moments only: boxes the fitted pixels were cut into (row strips, each cut again where it
+        has a column without a fitted pixel, e.g. on both sides of a central hole).
     moment_amplification : float or None
         Moments only: the largest coefficient row sum, the factor by which float64 rounding of
         the moments reaches the coefficients (relative error about this times 1.1e-16).
+    obscuration_source : str or None
+        ``annulus`` only: ``"given"`` or ``"measured"`` (the largest circle concentric with the
+        pupil free of valid pixels); the ratio itself is ``FitBasis.annular_obscuration``.
     """
 
     method: str
@@ -149,6 +154,7 @@ class FitterDiagnostics:
     refit: str = "operator"
     moment_strips: int | None = None
     moment_amplification: float | None = None
+    obscuration_source: str | None = None
 
     def as_dict(self) -> dict[str, object]:
         """JSON-ready form (the CLI's names)."""

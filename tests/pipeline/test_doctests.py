@@ -18,6 +18,7 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.zernike.names",  # mode_name
     "wavestack.pipeline.aperture.region",  # Aperture.from_mask
     "wavestack.pipeline.fit.build",  # build_fitter
+    "wavestack.pipeline.fit.annulus",  # annulus_obscuration
     "wavestack.pipeline.phase.psi.algorithms",  # phase_from_frames
     "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
     "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice

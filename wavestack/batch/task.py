@@ -148,7 +148,7 @@ def _polish(task: Task) -> TaskOutcome:
     fit = settings.fit_settings()
     fitter = build_fitter(mask, method=fit.method, modes=fit.modes, ordering=fit.ordering, remove=fit.remove,
                           mesh_vertices=fit.mesh_vertices, fallback="qr" if fit.method in ("csf-qcm", "conformal")
-                          else None)
+                          else None, obscuration=fit.obscuration)
     tick = time.perf_counter()
     fits = fit_block(fitter, np.stack(maps), nan_policy="omit", residual=True) if maps else []
     fit_s = time.perf_counter() - tick

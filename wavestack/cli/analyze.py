@@ -23,6 +23,7 @@ from wavestack.figures import write_fit_figure
 from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
 from wavestack.cli.command import Command
 from wavestack.cli.measured_map import ANALYZE_FLAGS, MapPixels, add_fit_method_argument, advised, fit_mask_of
+from wavestack.cli.measured_map import obscuration_report
 from wavestack.cli.measured_map import map_lines, map_report, read_map_wavefront, reject_unsupported
 from wavestack.pipeline import Aperture, IllConditionedBasis, InputError, available_methods, build_fitter
 from wavestack.pipeline import ConicTest, implied_conic_constant, null_wavefront_waves
@@ -154,6 +155,7 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         fitter = build_fitter(
             aperture, method=args.fit_method, modes=args.modes, ordering=args.ordering,
             dtype=np.float64, remove=args.remove, fallback="qr", fit_mask=fit_mask_of(measured),
+            obscuration=args.obscuration,
         )
     except IllConditionedBasis as error:
         raise advised(error, args.files[0], ANALYZE_FLAGS) from None
@@ -176,6 +178,7 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         "rms_waves": rms, "pv_waves": pv, "rms_nm": rms * wavelength_nm, "pv_nm": pv * wavelength_nm,
         "diagnostics": fitter.diagnostics.as_dict(),
         "timings": timings,
+        **obscuration_report(fitter.basis, fitter.diagnostics),
     })
     if result.removed is not None:
         report["removed"] = result.removed.as_dict()

@@ -48,6 +48,17 @@ def positive_finite_float(text: str) -> float:
     return value
 
 
+def obscuration_ratio(text: str) -> float:
+    """An obscuration ratio (inner over outer radius) strictly between 0 and 1, or argparse's usage error."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"expected a ratio of inner to outer radius between 0 and 1, got {text!r}")
+    return value
+
+
 # An interferometer's wavelength lies in (1 nm, 1 mm): X-rays to the far infrared.
 WAVELENGTH_RANGE_NM = (1.0, 1e6)
 

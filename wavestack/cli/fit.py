@@ -11,7 +11,8 @@ import numpy as np
 from wavestack.cli.arguments import bounded_int
 from wavestack.cli.command import Command
 from wavestack.cli.example import synthetic_example
-from wavestack.cli.measured_map import FIT_FLAGS, add_fit_method_argument, advised
+from wavestack.cli.measured_map import FIT_FLAGS, add_fit_method_argument, advised, obscuration_lines
+from wavestack.cli.measured_map import obscuration_report
 from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
 from wavestack.figures import FitView, write_fit_figure
 from wavestack.pipeline import (
@@ -122,6 +123,7 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             laplacian=args.laplacian,
             mesh_vertices=args.mesh_vertices,
             angular_balance=not args.no_angular_balance,
+            obscuration=args.obscuration,
         )
     except IllConditionedBasis as error:
         raise advised(error, source, FIT_FLAGS) from None
@@ -192,6 +194,7 @@ def fit_report(
         "dtype": fitter.dtype.name,
         "diagnostics": diagnostics,
         "timings": timings,
+        **obscuration_report(basis, fitter.diagnostics),
     }
     if result.circle_coefficients is not None:
         report["circle_coefficients"] = result.circle_coefficients.tolist()
@@ -217,6 +220,7 @@ def format_report(report: dict[str, Any]) -> str:
         f"timing      build {report['timings']['total'] * 1e3:.1f} ms, "
         f"fit {report['timings']['fit'] * 1e3:.2f} ms",
         f"residual    RMS {report['residual_rms']:.4g}, PV {report['residual_pv']:.4g} (map units)",
+        *obscuration_lines(report),
     ]
     if diagnostics["noise_gain"] > _NOISE_GAIN_WARNING:
         lines.append(

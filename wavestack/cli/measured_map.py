@@ -17,7 +17,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from wavestack.pipeline import Aperture, DetectionSettings, IllConditionedBasis, InputError
+from wavestack.cli.arguments import obscuration_ratio
+from wavestack.pipeline import Aperture, DetectionSettings, FitBasis, FitterDiagnostics, IllConditionedBasis, InputError
 from wavestack.pipeline import MeasuredWavefront, detect_aperture, read_measured_map, unsupported_reason
 
 # How a fitting library's setting is spelled on each command line.
@@ -145,11 +146,32 @@ def map_lines(report: dict[str, Any]) -> list[str]:
                      f"{p['dropouts_inside_aperture']} drop-outs inside the aperture (not fitted)")
     if report.get("fit_method_reason"):
         lines.append(f"fit method  {report['fit_method']}: {report['fit_method_reason']}")
-    return lines
+    return lines + obscuration_lines(report)
 
 
 def add_fit_method_argument(parser: argparse.ArgumentParser, flag: str, methods: Sequence[str]) -> None:
     """The fit-method option, ``auto`` by default."""
     parser.add_argument(flag, choices=tuple(methods), default="auto",
                         help="auto (default): circle where the circle basis is well conditioned on the "
-                             "aperture, else csf-qcm; says which and why")
+                             "aperture, else csf-qcm; says which and why; annulus: annular Zernike terms "
+                             "over the pupil annulus")
+    parser.add_argument("--obscuration", type=obscuration_ratio, metavar="E",
+                        help="annulus only: inner over outer radius, 0 < E < 1 (default: measured, the largest "
+                             "circle about the pupil centre holding no valid pixel)")
+
+
+def obscuration_report(basis: FitBasis, diagnostics: FitterDiagnostics) -> dict[str, Any]:
+    """The report keys of annular terms: their obscuration ratio (and for ``annulus`` its source); {} otherwise."""
+    if basis.annular_obscuration is None:
+        return {}
+    return {"annular_obscuration": basis.annular_obscuration, "obscuration_source": diagnostics.obscuration_source}
+
+
+def obscuration_lines(report: dict[str, Any]) -> list[str]:
+    """The text line of :func:`obscuration_report`'s keys, if any."""
+    if report.get("annular_obscuration") is None:
+        return []
+    source = report.get("obscuration_source")
+    how = {"given": " (given)", "measured": " (measured: the largest circle about the pupil centre free of "
+                                            "valid pixels)"}.get(source or "", " (the map's annulus)")
+    return [f"annulus     annular Zernike terms, unit RMS over obscuration {report['annular_obscuration']:.4f}{how}"]

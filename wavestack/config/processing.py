@@ -28,6 +28,7 @@ class FitSettings:
     ordering: str = "noll"
     remove: str | None = "ptt"
     mesh_vertices: int = 15000
+    obscuration: float | None = None
 
 
 @dataclass(frozen=True)
@@ -41,7 +42,10 @@ class ProcessingSettings:
     carrier_sign: Literal[1, -1] = 1
     modes: int = setting(36, minimum=3, maximum=231)
     ordering: Literal["noll", "ansi", "fringe"] = "noll"
-    fit_method: Literal["csf-qcm", "conformal", "qr", "circle"] = "csf-qcm"
+    fit_method: Literal["csf-qcm", "conformal", "qr", "circle", "annulus"] = "csf-qcm"
+    obscuration: float | None = setting(None, minimum=0.0, maximum=1.0,
+                                        doc="annulus only: inner over outer radius, 0 < E < 1 (absent: measured "
+                                            "from the aperture's central hole)")
     remove: Literal["ptt", "pttp", "none"] = "ptt"
     fit_decimation: int = setting(2, minimum=1, maximum=8, doc="fit every n-th pixel in each direction")
     iou_threshold: float = setting(0.98, minimum=0.5, maximum=1.0)
@@ -58,7 +62,8 @@ class ProcessingSettings:
         return len(self.steps_deg) if self.method == "psi" else 1
 
     def check(self, *, source: str) -> None:
-        """Refuse phase steps the algorithm cannot work with (``method = "psi"`` only).
+        """Refuse phase steps the algorithm cannot work with (``method = "psi"`` only), and an
+        ``obscuration`` outside (0, 1) or without ``fit_method = "annulus"``.
 
         Rules: 3 to :data:`MAX_STEPS` steps; ``four`` and ``hariharan`` take exactly their own
         steps (:data:`FIXED_STEPS_DEG`, from any first step); ``lsq``, ``aia`` and ``pca`` need at
@@ -68,8 +73,12 @@ class ProcessingSettings:
         Raises
         ------
         ConfigError
-            One line naming ``source``, ``[processing] steps_deg``, the steps and the rule.
+            One line naming ``source``, the key (``[processing] steps_deg`` or ``obscuration``), the
+            value and the rule.
         """
+        problem = _obscuration_problem(self.fit_method, self.obscuration)
+        if problem is not None:
+            raise ConfigError(f"{source}: [processing] obscuration = {self.obscuration!r}: {problem}")
         if self.method != "psi":
             return
         shown = ", ".join(f"{step:g}" for step in self.steps_deg[:8]) + (", ..." if len(self.steps_deg) > 8 else "")
@@ -80,7 +89,18 @@ class ProcessingSettings:
 
     def fit_settings(self) -> FitSettings:
         return FitSettings(self.fit_method, self.modes, self.ordering, None if self.remove == "none" else self.remove,
-                           self.mesh_vertices)
+                           self.mesh_vertices, self.obscuration)
+
+
+def _obscuration_problem(fit_method: str, obscuration: float | None) -> str | None:
+    """Why an obscuration cannot go with the fit method, or None."""
+    if obscuration is None:
+        return None
+    if fit_method != "annulus":
+        return f"expected only with fit_method = \"annulus\" (fit_method is {fit_method!r})"
+    if not 0.0 < obscuration < 1.0:
+        return "expected a ratio of inner to outer radius strictly between 0 and 1"
+    return None
 
 
 def _step_problem(algorithm: str, steps_deg: tuple[float, ...]) -> str | None:

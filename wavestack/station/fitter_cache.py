@@ -32,7 +32,7 @@ class FitterChoice:
     ----------
     fitter : Fitter
     kind : str
-        The method that built it (``csf-qcm``, ``qr``, ``circle``, ``conformal``).
+        The method that built it (``csf-qcm``, ``qr``, ``circle``, ``annulus``, ``conformal``).
     fallback : bool
         True when it stands in for the configured method while that one is being built.
     aperture_id : int
@@ -77,7 +77,7 @@ class FitterCache:
     def _build(self, aperture: Aperture, method: str) -> Fitter:
         s = self._settings
         return build_fitter(aperture, method=method, modes=s.modes, ordering=s.ordering, remove=s.remove,
-                            mesh_vertices=s.mesh_vertices,
+                            mesh_vertices=s.mesh_vertices, obscuration=s.obscuration,
                             fallback="qr" if method in ("csf-qcm", "conformal") else None)
 
     def new_aperture(self, aperture: Aperture, *, method: str | None = None) -> FitterChoice:

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from fuzz import fuzz_settings
+from moment_pairs import assert_same_fit, moments_match_or_refuse
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from wavestack.pipeline import IllConditionedBasis, build_fitter, mode_list
+from wavestack.pipeline import build_fitter, mode_list
 from wavestack.pipeline.fit.store import load_fitter, save_fitter
 
 
@@ -42,29 +43,6 @@ def _pair(mask, **settings):
     return moments, operator
 
 
-def _relative(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.linalg.norm(a - b) / max(np.linalg.norm(b), 1e-300))
-
-
-def _terms(removed) -> np.ndarray:
-    return np.array([removed.piston, removed.tilt_x, removed.tilt_y, removed.power or 0.0])
-
-
-def _assert_same(a, b, frame: np.ndarray) -> None:
-    # 1e-9 norm-wise: the bound. The build accepts moments only where their rounding,
-    # measured ~30 * 1.1e-16 * moment_amplification, stays at 1e-10; the operator's is ~1e-15.
-    assert _relative(a.coefficients, b.coefficients) <= 1e-9
-    if b.circle_coefficients is not None:
-        assert _relative(a.circle_coefficients, b.circle_coefficients) <= 1e-9
-    if b.removed is not None:
-        assert _relative(_terms(a.removed), _terms(b.removed)) <= 1e-9
-    # The residual comes from the identity |w|^2 - c.b: its rounding scales with the frame's
-    # energy, so the squared RMS is compared to 1e-9 of the mean square of the samples.
-    energy = float(np.nanmean(frame[np.isfinite(frame)] ** 2))
-    assert abs(a.residual_rms**2 - b.residual_rms**2) <= 1e-9 * energy
-    assert a.valid_count == b.valid_count and a.nan_count == b.nan_count
-
-
 @pytest.mark.slow
 @fuzz_settings(12)
 @given(
@@ -85,18 +63,7 @@ def test_moments_equal_the_operator_to_1e_9(kind, size, ordering, modes, method,
     if pupil_scale is not None:
         pupil = ((size - 1) / 2 + 0.7, (size - 1) / 2 - 0.4, pupil_scale * size * 0.5)
     settings = dict(method=method, modes=modes, ordering=ordering, pupil=pupil, remove=remove, dtype=np.float64)
-    try:
-        operator = build_fitter(mask, refit="operator", **settings)
-    except IllConditionedBasis:
-        assume(False)  # too many modes for this aperture: no path builds (checked elsewhere)
-    chosen = build_fitter(mask, **settings)
-    frame = _frame(operator, mask, rng, offset=rng.uniform(-3, 3))
-    if chosen.refit == "operator":  # auto kept the operator: only where moments would lose precision
-        with pytest.raises(ValueError, match="would lose precision"):
-            build_fitter(mask, refit="moments", **settings)
-        return
-    assert chosen.diagnostics.moment_amplification <= 3e4
-    _assert_same(chosen.fit(frame), operator.fit(frame), frame)
+    moments_match_or_refuse(mask, settings, lambda operator: _frame(operator, mask, rng, offset=rng.uniform(-3, 3)))
 
 
 def test_a_degree_20_disk_matches_the_operator_with_residual_and_surface() -> None:
@@ -106,7 +73,7 @@ def test_a_degree_20_disk_matches_the_operator_with_residual_and_surface() -> No
     assert moments.diagnostics.moment_amplification <= 3e4 and moments.diagnostics.moment_strips > 1
     frame = _frame(operator, mask, rng, offset=40.0)  # a large piston: the shift keeps the sums exact
     a, b = moments.fit(frame, residual=True), operator.fit(frame, residual=True)
-    _assert_same(a, b, frame)
+    assert_same_fit(a, b, frame)
     scale = np.nanmax(np.abs(frame))
     np.testing.assert_allclose(a.residual_map, b.residual_map, atol=1e-9 * scale, equal_nan=True)
     assert a.residual_pv == pytest.approx(b.residual_pv, rel=1e-6)
@@ -126,7 +93,7 @@ def test_nan_samples_are_left_out_as_the_operator_leaves_them(dropped) -> None:
                                                                               np.nan, np.inf)
     a, b = moments.fit(frame, nan_policy="omit", residual=True), operator.fit(frame, nan_policy="omit", residual=True)
     assert a.nan_count == dropped
-    _assert_same(a, b, frame)
+    assert_same_fit(a, b, frame)
     assert np.array_equal(np.isnan(a.residual_map), np.isnan(b.residual_map))
     with pytest.raises(Exception, match="NaN or infinite"):
         moments.fit(frame)
@@ -157,7 +124,7 @@ def test_float32_frames_are_summed_in_float64() -> None:
     frame = _frame(operator, mask, rng).astype(np.float32)
     # The moments read the float32 samples exactly and sum in float64: the float64 operator on the
     # same (float32-valued) samples is the reference, to the same 1e-9.
-    _assert_same(moments.fit(frame), operator.fit(frame.astype(np.float64)), frame.astype(np.float64))
+    assert_same_fit(moments.fit(frame), operator.fit(frame.astype(np.float64)), frame.astype(np.float64))
 
 
 def test_a_stored_moment_fitter_round_trips(tmp_path) -> None:
