@@ -129,22 +129,26 @@ class StationSource:
         Valid maps averaged per field point.
     timeout_s : float
         Longest wait for them.
+    settle_s : float
+        Maps count only if exposed this long after the call (the platform's ringing, the remote
+        bench's render), s.
     prepare : callable, optional
         Called before each measurement; a map it returns is added to the average (the simulated
         bench's reference tilt).
     """
 
     def __init__(self, maps: StationMaps, mask: NDArray[np.bool_], *, averaged: int = 3, timeout_s: float = 30.0,
-                 prepare: Prepare | None = None) -> None:
+                 settle_s: float = 0.0, prepare: Prepare | None = None) -> None:
         self.maps = maps
         self._mask, self._averaged, self._timeout_s = np.asarray(mask, dtype=bool), averaged, timeout_s
+        self._settle_ns = int(round(settle_s * 1e9))
         self._prepare = prepare
 
     def measure(self, index: int) -> FieldMeasurement:
-        """Average the maps exposed after this call on the fixed aperture (raises if untrusted)."""
+        """Average the maps exposed ``settle_s`` after this call on the fixed aperture (raises if untrusted)."""
         added = self._prepare() if self._prepare is not None else None
-        after = time.time_ns()
-        waves = self.maps.average(self._averaged, after, self._timeout_s)
+        after = time.time_ns() + self._settle_ns
+        waves = self.maps.average(self._averaged, after, self._timeout_s + self._settle_ns * 1e-9)
         if added is not None:
             waves = waves + added
         if not np.all(np.isfinite(waves[self._mask])):
