@@ -145,7 +145,8 @@ def open_real_session(config: AlignConfig, stack: ExitStack) -> AlignSession:
     hexapod = _driver(config.hexapod, stack)
     stage = _driver(config.field_stage, stack)
     maps = StationMaps(station_path, stack)
-    station = StationSource(maps, mask, averaged=config.align.averaged, settle_s=config.align.settle_s)
+    station = StationSource(maps, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
+                            timeout_s=config.align.measure_timeout_s)
     logger.info("align: real bench: hexapod %s, field stage %s, station %s (tilt removed from fit and RMS)",
                 config.hexapod.url, config.field_stage.url, station_path)
     return AlignSession(None, hexapod, stage, design, fitter, _field_positions(config), station)
@@ -209,4 +210,5 @@ def _coupled_station(config: AlignConfig, station_path: Path, bench: AlignmentBe
         frame, tilt = coupling.refresh()
         return tilt.plane(frame.waves.shape)
 
-    return StationSource(maps, mask, averaged=config.align.averaged, settle_s=config.align.settle_s, prepare=prepare)
+    return StationSource(maps, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
+                         timeout_s=config.align.measure_timeout_s, prepare=prepare)

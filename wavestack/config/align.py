@@ -59,6 +59,8 @@ class AlignSettings:
     station: str | None = setting(None, doc="station TOML measuring through the camera (relative to this file); "
                                             "absent: the model's wavefront maps")
     averaged: int = setting(3, minimum=1, maximum=100, doc="valid station maps averaged per field point")
+    measure_timeout_s: float = setting(30.0, minimum=0.1, maximum=600.0, doc="longest wait for a field point's "
+                                                                             "station maps, s (then refused)")
     settle_s: float = setting(0.0, minimum=0.0, maximum=60.0, doc="maps count only if exposed this long after the "
                                                                   "stage and hexapod reported on target, s (station "
                                                                   "measurements; a real platform rings)")
