@@ -64,7 +64,7 @@ class IterationRecord:
     iteration : int
         0 for the first measurement.
     rms_waves : tuple of float
-        RMS (piston removed) per field point, waves.
+        RMS per field point, waves: piston removed (and the plane, on a real bench: ``TermFitter.rms``).
     estimate : tuple of float or None
         Estimated misalignment X Y Z mm, U V deg (None when the loop stopped before estimating).
     move : dict or None
