@@ -195,3 +195,9 @@ def test_a_camera_that_drops_and_returns_costs_no_stale_map(tmp_path: Path) -> N
                 remote.lose_camera()
         summary, _ = _run(remote, config, session, arm)
     assert summary.state.phase is AlignPhase.TARGET_MET, summary.state.reason
+
+
+def test_the_bench_simulator_refuses_a_non_loopback_host_without_allow_remote() -> None:
+    from wavestack.cli.sim_align_bench import run_align_bench_simulator
+    with pytest.raises(ValueError, match="--allow-remote"):
+        run_align_bench_simulator(None, "0.0.0.0", (0, 0, 0), False, None, lambda line: None, threading.Event())
