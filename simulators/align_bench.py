@@ -78,16 +78,19 @@ class AlignmentBench:
         RMS of the white noise added per pixel, waves.
     seed : int
         Seed of the noise.
+    host, hexapod_port, field_stage_port : str, int, int
+        Where the two controllers listen (default: loopback, free ports).
     """
 
     def __init__(self, design: TmaDesign, as_built: AsBuiltErrors, mount: HexapodPose, *,
                  hexapod: HexapodSimSettings, field_stage: HexapodSimSettings, mm_per_deg: float,
-                 noise_waves: float = 0.0, seed: int = 0) -> None:
+                 noise_waves: float = 0.0, seed: int = 0, host: str = "127.0.0.1", hexapod_port: int = 0,
+                 field_stage_port: int = 0) -> None:
         if len(field_stage.axes) != 2:
             raise ValueError(f"field_stage: expected 2 axes, got {field_stage.axes}")
         self.truth = TmaModel(design, as_built, mount=mount)
-        self.hexapod = HexapodSimulator(hexapod)
-        self.field_stage = HexapodSimulator(field_stage)
+        self.hexapod = HexapodSimulator(hexapod, host=host, port=hexapod_port)
+        self.field_stage = HexapodSimulator(field_stage, host=host, port=field_stage_port)
         self.mm_per_deg = float(mm_per_deg)
         self._noise = float(noise_waves)
         self._rng = np.random.default_rng(seed)

@@ -149,6 +149,7 @@ def test_a_carrier_station_ignores_the_phase_steps() -> None:
 
 
 STATION_FILES = [DEFAULT_CONFIG, ROOT / "config" / "shack-hartmann.toml", ROOT / "config" / "station-hardware.example.toml",
+                 ROOT / "config" / "tma-alignment-remote-station.toml",
                  *sorted((ROOT / "tests" / "configs").glob("*.toml"))]
 
 
@@ -165,8 +166,9 @@ def test_every_shipped_device_file_still_validates() -> None:
     station_files = {p.name for p in STATION_FILES}
     assert {p.name for p in (ROOT / "config").glob("*.toml")} - station_files == {
         "plc-sim.toml", "plc-example.toml", "pzt-sim.toml", "pzt-mdt693b.example.toml",
-        "polishing-zygo.toml", "hexapod-sim.toml"}, "a new example needs a test"
-    # polishing: tests/config/test_polishing_settings.py; hexapod: test_hexapod_settings.py
+        "polishing-zygo.toml", "hexapod-sim.toml", "tma-alignment-remote.toml"}, "a new example needs a test"
+    # polishing: tests/config/test_polishing_settings.py; hexapod: test_hexapod_settings.py;
+    # the real alignment bench: tests/align/test_real_bench.py
 
 
 def test_a_free_running_camera_slower_than_the_timeouts_is_refused() -> None:

@@ -64,7 +64,7 @@ class IterationRecord:
     iteration : int
         0 for the first measurement.
     rms_waves : tuple of float
-        RMS (piston removed) per field point, waves.
+        RMS per field point, waves: piston removed (and the plane, on a real bench: ``TermFitter.rms``).
     estimate : tuple of float or None
         Estimated misalignment X Y Z mm, U V deg (None when the loop stopped before estimating).
     move : dict or None
@@ -219,13 +219,13 @@ class AlignmentLoop:
         except Exception as error:  # noqa: BLE001 - any failure of the source refuses the measurement
             return AlignEvent.UNTRUSTED, f"measurement at field point {index} refused: {error}"
         r.maps.append(FieldMeasurement(waves, measured.exposure_ns))
-        rms = float(np.std(waves[self._fitter.mask]))
+        rms = self._fitter.rms(waves)
         if index + 1 < len(self._fields):
             return AlignEvent.MEASURED, f"field point {index}: RMS {rms:.4f} waves"
         return AlignEvent.ALL_MEASURED, f"field point {index}: RMS {rms:.4f} waves (all measured)"
 
     def _check(self, r: _Run) -> tuple[AlignEvent, str]:
-        rms = tuple(float(np.std(m.waves[self._fitter.mask])) for m in r.maps)
+        rms = tuple(self._fitter.rms(m.waves) for m in r.maps)
         if r.record is not None:
             self._emit(r)
         r.record = IterationRecord(r.state.iterations_done, rms)

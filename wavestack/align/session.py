@@ -1,13 +1,18 @@
 """An alignment session: the bench's devices opened and the loop's pieces built from the configuration.
 
-:func:`open_session` starts the simulated bench (``[align] simulated = true``: both PI simulators on
-loopback, the as-built telescope with a seeded mount error, :mod:`wavestack.simulators.align_bench`),
-opens the hexapod and field-stage drivers on them, and builds what :class:`~.loop.AlignmentLoop`
-takes: the design model, the fitter on the pupil's aperture, the field stage's target per field
-point and the measurement (the bench's wavefront maps, or with ``[align] station`` the station's
-maps through the simulated camera, :mod:`.station_source`). A real
-bench (``simulated = false``) needs an interferometer source wired here: not done yet (the
-session refuses it with a message).
+:func:`open_session` builds what :class:`~.loop.AlignmentLoop` takes: the design model, the fitter
+on the pupil's aperture, the field stage's target per field point, the opened hexapod and field
+stage drivers and the measurement.
+
+- ``[align] simulated = true``: it starts the simulated bench (both PI simulators on loopback, the
+  as-built telescope with a seeded mount error, :mod:`wavestack.simulators.align_bench`) and
+  measures the bench's wavefront maps, or with ``[align] station`` the station's maps through the
+  simulated camera (:mod:`.station_source`, the telescope coupled to the station's optic).
+- ``[align] simulated = false`` (a real bench, :func:`open_real_session`): nothing simulated is
+  started; the drivers open ``[hexapod] url`` and ``[field_stage] url``, the measurement is the
+  station of ``[align] station`` (required) on its own devices, and the loop fits and judges
+  without tilt (:class:`~.terms.TermFitter` ``remove_tilt``): the reference's tip/tilt setting at
+  each field point is the operator's and is not known to the loop (docs/alignment.md).
 """
 
 from __future__ import annotations
@@ -15,30 +20,33 @@ from __future__ import annotations
 import logging
 from contextlib import ExitStack
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from wavestack.align.fringes import MAX_SLOPE_WAVES_PER_PX, fringe_slope_bound
 from wavestack.align.loop import AlignOptions, FieldMeasurement
-from wavestack.align.station_source import StationSource, fixed_aperture
+from wavestack.align.station_source import StationMaps, StationSource, fixed_aperture
 from wavestack.align.terms import TermFitter
 from wavestack.config.align import AlignConfig
-from wavestack.config.hexapod import build_hexapod
+from wavestack.config.hexapod import HexapodSettings, build_hexapod
 from wavestack.drivers.pi_gcs import PIHexapod
 from wavestack.pipeline import InputError
-from wavestack.simulators.align_bench import AlignmentBench, draw_mount
+from wavestack.simulators.align_bench import AlignmentBench, SurfaceCoupling, draw_mount
 from wavestack.simulators.tma import HexapodPose, TmaModel
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["AlignSession", "check_fringes", "open_session", "options_of"]
+__all__ = ["AlignSession", "check_fringes", "open_real_session", "open_session", "options_of"]
 
 
 @dataclass(eq=False)
 class AlignSession:
-    """What an alignment runs on (the loop's keyword arguments, and the bench for tests)."""
+    """What an alignment runs on (the loop's keyword arguments, and the simulated bench for tests: None on a
+    real bench)."""
 
-    bench: AlignmentBench
+    bench: AlignmentBench | None
     hexapod: PIHexapod
     field_stage: PIHexapod
     design: TmaModel
@@ -51,6 +59,8 @@ class AlignSession:
         average of ``averaged`` renders of the bench (``index`` is for messages)."""
         if self.station is not None:
             return self.station.measure(index)
+        if self.bench is None:
+            raise ValueError(f"field point {index}: no measurement source")
         frames = [self.bench.wavefront() for _ in range(averaged)]
         waves = np.mean([f.waves for f in frames], axis=0)
         return FieldMeasurement(waves, frames[0].exposure_ns)
@@ -97,34 +107,72 @@ def check_fringes(config: AlignConfig, design: TmaModel) -> float:
     return bound
 
 
-def _driver(settings, port: int, stack: ExitStack) -> PIHexapod:  # type: ignore[no-untyped-def]
-    driver = build_hexapod(replace(settings, url=f"tcp://127.0.0.1:{port}"))
+def _driver(settings: HexapodSettings, stack: ExitStack, url: str | None = None) -> PIHexapod:
+    """Open a PI driver on ``url`` (default: the configured one); on a real controller set the configured
+    pivot and velocity."""
+    driver = build_hexapod(settings if url is None else replace(settings, url=url))
     driver.open()
     stack.callback(driver.close)
+    if settings.pivot_mm is not None:
+        driver.set_pivot(settings.pivot_mm)
+    if settings.velocity is not None:
+        driver.set_velocity(settings.velocity)
     return driver
 
 
-def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | None = None,
-                 as_built_seed: int | None = None, noise_waves: float = 0.0) -> AlignSession:
-    """Start the simulated bench and open its drivers (module notes); ``stack`` closes everything.
+def _field_positions(config: AlignConfig) -> list[dict[str, float]]:
+    scale = config.align.field_stage_mm_per_deg
+    return [dict(zip(config.field_stage.axes, (fx * scale, fy * scale))) for fx, fy in config.design.field_points_deg]
 
-    Parameters
-    ----------
-    mount : HexapodPose, optional
-        The unknown mount error (default: drawn from ``[align.simulator]``).
-    as_built_seed : int, optional
-        Overrides ``[tma.as_built] seed``.
-    noise_waves : float
-        Per-pixel white noise of the simulated measurement, waves RMS.
+
+def open_real_session(config: AlignConfig, stack: ExitStack) -> AlignSession:
+    """Open a real bench (module notes); ``stack`` closes everything.
 
     Raises
     ------
     InputError
-        ``[align] simulated = false`` (no real interferometer source yet).
+        ``[align] station`` absent (a real bench measures through its interferometer station).
+    ConfigError, DeviceError
+        The station file, or a controller or station device that does not open.
+    """
+    station_path = config.station_path()
+    if station_path is None:
+        raise InputError(f"{config.source}: [align] station: required with simulated = false (the station TOML "
+                         "of the interferometer: its camera and piezo); expected a path relative to this file")
+    design = TmaModel(config.design)
+    mask = fixed_aperture(design.pupil_mask, config.align.edge_px)
+    fitter = TermFitter(mask, config.align.max_noll, method=config.align.fit_method, remove_tilt=True)
+    hexapod = _driver(config.hexapod, stack)
+    stage = _driver(config.field_stage, stack)
+    maps = StationMaps(station_path, stack)
+    station = StationSource(maps, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
+                            timeout_s=config.align.measure_timeout_s)
+    logger.info("align: real bench: hexapod %s, field stage %s, station %s (tilt removed from fit and RMS)",
+                config.hexapod.url, config.field_stage.url, station_path)
+    return AlignSession(None, hexapod, stage, design, fitter, _field_positions(config), station)
+
+
+def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | None = None,
+                 as_built_seed: int | None = None, noise_waves: float = 0.0) -> AlignSession:
+    """Start the simulated bench and open its drivers, or open a real bench (module notes); ``stack`` closes
+    everything.
+
+    Parameters
+    ----------
+    mount : HexapodPose, optional
+        The unknown mount error (default: drawn from ``[align.simulator]``; simulated bench only).
+    as_built_seed : int, optional
+        Overrides ``[tma.as_built] seed`` (simulated bench only).
+    noise_waves : float
+        Per-pixel white noise of the simulated measurement, waves RMS (simulated bench only).
+
+    Raises
+    ------
+    InputError
+        A real bench without ``[align] station``.
     """
     if not config.align.simulated:
-        raise InputError(f"{config.source}: [align] simulated = false: a real interferometer source is not wired "
-                         "into the alignment loop yet; set simulated = true")
+        return open_real_session(config, stack)
     sim = config.align.simulator
     mount = mount or draw_mount(sim.decentre_mm, sim.despace_mm, sim.tilt_deg, sim.seed)
     errors = config.as_built if as_built_seed is None else replace(config.as_built, seed=as_built_seed)
@@ -132,8 +180,8 @@ def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | 
                            field_stage=config.field_stage_simulator, mm_per_deg=config.align.field_stage_mm_per_deg,
                            noise_waves=noise_waves, seed=sim.seed)
     stack.enter_context(bench)
-    hexapod = _driver(config.hexapod, bench.hexapod.port, stack)
-    stage = _driver(config.field_stage, bench.field_stage.port, stack)
+    hexapod = _driver(config.hexapod, stack, f"tcp://127.0.0.1:{bench.hexapod.port}")
+    stage = _driver(config.field_stage, stack, f"tcp://127.0.0.1:{bench.field_stage.port}")
     design = TmaModel(config.design)
     station_path = config.station_path()
     station = None
@@ -144,10 +192,23 @@ def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | 
         check_fringes(config, design)
         mask = fixed_aperture(design.pupil_mask, config.align.edge_px)
         fitter = TermFitter(mask, config.align.max_noll, method=method)
-        station = StationSource(station_path, bench, mask, stack, averaged=config.align.averaged,
-                                null_tilt=config.align.null_tilt)
-    scale = config.align.field_stage_mm_per_deg
-    positions = [dict(zip(config.field_stage.axes, (fx * scale, fy * scale)))
-                 for fx, fy in config.design.field_points_deg]
+        station = _coupled_station(config, station_path, bench, mask, stack)
     logger.info("align: simulated bench, mount error %s (unknown to the loop)", mount.as_tuple())
-    return AlignSession(bench, hexapod, stage, design, fitter, positions, station)
+    return AlignSession(bench, hexapod, stage, design, fitter, _field_positions(config), station)
+
+
+def _coupled_station(config: AlignConfig, station_path: Path, bench: AlignmentBench, mask: NDArray[np.bool_],
+                     stack: ExitStack) -> StationSource:
+    """The simulated station with the telescope coupled to its optic (the reference's tilt added back)."""
+    maps = StationMaps(station_path, stack)
+    optic = getattr(maps.devices.bench, "optic", None)
+    reflection = getattr(getattr(maps.config.optic, "surface", None), "reflection_factor", 2.0)
+    coupling = SurfaceCoupling(bench, getattr(optic, "surface", None), maps.config.station.wavelength_nm,
+                               reflection, null_tilt=config.align.null_tilt)
+
+    def prepare() -> NDArray[np.float64]:
+        frame, tilt = coupling.refresh()
+        return tilt.plane(frame.waves.shape)
+
+    return StationSource(maps, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
+                         timeout_s=config.align.measure_timeout_s, prepare=prepare)

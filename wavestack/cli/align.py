@@ -3,7 +3,10 @@
 Without ``--config`` it runs the simulated alignment bench (``wavestack/config/tma-alignment.toml``,
 shipped inside the package): both PI controllers
 simulated on loopback and started by the command, the as-built telescope with a seeded mount error
-the loop does not know. Per iteration it prints the RMS per field point, the estimated
+the loop does not know. With ``[align] simulated = false`` (a real bench, e.g.
+``config/tma-alignment-remote.toml``) it starts nothing simulated: the controllers at ``[hexapod]
+url`` and ``[field_stage] url``, the station of ``[align] station``, and the fit and RMS without
+tilt (docs/alignment.md). Per iteration it prints the RMS per field point, the estimated
 misalignment per degree of freedom, the move sent and the position read back (one JSON object per
 iteration with ``--json``), and records them with ``--record``.
 

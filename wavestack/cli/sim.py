@@ -40,6 +40,19 @@ def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
     hexapod.add_argument("--port", type=int, default=0, help="TCP port; 0 picks a free one (default)")
     hexapod.add_argument("--allow-remote", action="store_true",
                          help="allow a non-loopback host (GCS over TCP has no authentication)")
+    bench = devices.add_parser("align-bench", help="the TMA alignment bench: hexapod, field stage, camera, piezo",
+                               description="Serve the simulated alignment bench as a real one's devices (PI "
+                                           "hexapod and field stage on GCS over TCP, the camera's USB bus over "
+                                           "TCP, the piezo on a pty) with the telescope coupled inside; prints "
+                                           "one 'NAME listening HOST:PORT' (or 'piezo pty PATH') line per device.")
+    bench.add_argument("--config", type=Path, help="alignment TOML (default: the shipped tma-alignment.toml)")
+    bench.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    for name in ("hexapod", "field-stage", "camera"):
+        bench.add_argument(f"--{name}-port", type=int, default=0, help=f"TCP port of the {name}; 0 picks a free one")
+    bench.add_argument("--piezo-port", type=int, help="serve the piezo on this TCP port (socket://) instead of a pty")
+    bench.add_argument("--seed", type=int, help="seed of the mount error (default: [align.simulator] seed)")
+    bench.add_argument("--allow-remote", action="store_true",
+                       help="allow a non-loopback host (GCS and the USB tunnel have no authentication)")
 
 
 def _announce(line: str) -> None:
@@ -55,6 +68,13 @@ def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
         def runner() -> None:
             run_pzt_simulator(args.config, _announce, stop)
+    elif args.device == "align-bench":
+        from wavestack.cli.sim_align_bench import run_align_bench_simulator
+
+        def runner() -> None:
+            run_align_bench_simulator(args.config, args.host, (args.hexapod_port, args.field_stage_port,
+                                                               args.camera_port), args.allow_remote, args.seed,
+                                      _announce, stop, piezo_port=args.piezo_port)
     elif args.device == "hexapod":
         from wavestack.cli.sim_hexapod import run_hexapod_simulator
 
@@ -74,7 +94,7 @@ def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 COMMAND = Command(
     "sim",
-    help="run a simulated instrument standalone (pzt, plc, hexapod)",
+    help="run a simulated instrument standalone (pzt, plc, hexapod, align-bench)",
     description="Run one simulated instrument on its real transport until Ctrl-C or SIGTERM.",
     add_arguments=add_sim_arguments, handler=run_sim,
     subject=lambda args: str(args.config) if args.config else f"sim {args.device}",

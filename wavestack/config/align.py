@@ -54,10 +54,16 @@ class AlignSettings:
                                                     doc="largest read-back difference X Y Z mm, U V deg")
     field_stage_mm_per_deg: float = setting(10.0, minimum=1e-3, maximum=1e3,
                                             doc="field stage travel (axes 1, 2) per degree of field")
-    simulated: bool = setting(True, doc="start the simulated bench (hexapod, field stage, telescope)")
+    simulated: bool = setting(True, doc="start the simulated bench (hexapod, field stage, telescope); false: a "
+                                        "real bench at [hexapod] url, [field_stage] url, and [align] station")
     station: str | None = setting(None, doc="station TOML measuring through the camera (relative to this file); "
                                             "absent: the model's wavefront maps")
     averaged: int = setting(3, minimum=1, maximum=100, doc="valid station maps averaged per field point")
+    measure_timeout_s: float = setting(30.0, minimum=0.1, maximum=600.0, doc="longest wait for a field point's "
+                                                                             "station maps, s (then refused)")
+    settle_s: float = setting(0.0, minimum=0.0, maximum=60.0, doc="maps count only if exposed this long after the "
+                                                                  "stage and hexapod reported on target, s (station "
+                                                                  "measurements; a real platform rings)")
     edge_px: int = setting(2, minimum=0, maximum=20, doc="pupil rim pixels left out of the fixed aperture "
                                                          "(station measurements)")
     fit_method: str = setting("csf-qcm", choices=("csf-qcm", "circle", "qr"),

@@ -1,8 +1,10 @@
 """Configuration of the camera: tables ``[camera]`` and ``[camera.simulator]``.
 
 ``[camera]`` configures the driver: ``url = "usb://"`` opens the first USB3 Vision camera,
-``usb://SERIAL`` one by serial number, and ``sim://u3v`` the simulated camera of a simulated
-bench (a pyusb backend the station builds itself, see :mod:`wavestack.simulators.bench`).
+``usb://SERIAL`` one by serial number, ``sim://u3v`` the simulated camera of a simulated
+bench (a pyusb backend the station builds itself, see :mod:`wavestack.simulators.bench`), and
+``usbtcp://HOST:PORT[/SERIAL]`` a camera whose USB bus is served over TCP by another process
+(:mod:`wavestack.drivers.u3v.usb_tcp`: the remote alignment-bench simulator's camera).
 ``[camera.simulator]`` describes that simulated camera. Example::
 
     [camera]
@@ -18,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from wavestack.config.schema import ConfigError, device_tables, parse_section, setting
+from wavestack.drivers.u3v.usb_tcp import parse_usbtcp_url
 
 PixelFormat = Literal["Mono8", "Mono12", "Mono16"]
 
@@ -26,8 +29,9 @@ PixelFormat = Literal["Mono8", "Mono12", "Mono16"]
 class CameraSettings:
     """``[camera]``: which camera and how to set it up."""
 
-    url: str = setting("sim://u3v", url_kinds=("usb", "sim"),
-                       doc="usb:// (first camera), usb://SERIAL, or sim://u3v (simulated bench)")
+    url: str = setting("sim://u3v", url_kinds=("usb", "sim", "usbtcp"),
+                       doc="usb:// (first camera), usb://SERIAL, sim://u3v (simulated bench), or "
+                           "usbtcp://HOST:PORT[/SERIAL] (a USB bus served over TCP)")
     pixel_format: PixelFormat | None = setting(None, doc="set at start; absent keeps the camera's")
     exposure_us: float | None = setting(None, minimum=1.0, maximum=10_000_000.0, doc="exposure, microseconds")
     timeout_s: float = setting(2.0, minimum=0.01, maximum=60.0, doc="open and per-frame timeout, s")
@@ -35,7 +39,10 @@ class CameraSettings:
 
     @property
     def serial(self) -> str | None:
-        """Serial number from ``usb://SERIAL`` (None for ``usb://`` or a simulator)."""
+        """Serial number from ``usb://SERIAL`` or ``usbtcp://HOST:PORT/SERIAL`` (None for ``usb://`` or a
+        simulator)."""
+        if self.url.startswith("usbtcp://"):
+            return self.url[len("usbtcp://"):].partition("/")[2].strip("/") or None
         if not self.url.startswith("usb://"):
             return None
         return self.url[len("usb://"):] or None
@@ -69,6 +76,11 @@ def parse_camera_config(document: Mapping[str, Any], *, source: str) -> tuple[Ca
     settings = parse_section(CameraSettings, main, source=source, section="camera")
     simulator = parse_section(CameraSimulatorSettings, simulator_table or {}, source=source,
                               section="camera.simulator")
+    if settings.url.startswith("usbtcp://"):
+        try:
+            parse_usbtcp_url(settings.url)
+        except ValueError as error:
+            raise ConfigError(f"{source}: [camera] {error}") from None
     if settings.simulated and settings.url != "sim://u3v":
         raise ConfigError(f"{source}: [camera] url: expected sim://u3v for the simulated camera, got {settings.url!r}")
     return settings, simulator

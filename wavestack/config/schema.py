@@ -28,7 +28,7 @@ from wavestack.pipeline import InputError
 T = TypeVar("T")
 
 #: URL kinds a device field may allow. ``device`` is a local device path (``/dev/...``, ``COMn``).
-URL_KINDS = ("sim", "socket", "tcp", "usb", "device")
+URL_KINDS = ("sim", "socket", "tcp", "usb", "usbtcp", "device")
 #: Integers are TOML's: signed 64-bit.
 _INT64 = (-(2 ** 63), 2 ** 63 - 1)
 _SCHEME = re.compile(r"^([a-z][a-z0-9+.-]*)://")

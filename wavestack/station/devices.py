@@ -22,6 +22,7 @@ from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
 from wavestack.drivers.plc import CommandLimits, PolishingLink
 from wavestack.drivers.u3v import U3VCamera
+from wavestack.drivers.u3v.usb_tcp import UsbTcpBackend, parse_usbtcp_url
 from wavestack.config import BIT_DEPTH, StationConfig, build_calibration, build_piezo, build_simulated_device
 from wavestack.simulators import attach_simulated_device, register_serial_simulators
 from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
@@ -113,7 +114,11 @@ def reconnect_devices(devices: StationDevices, config: StationConfig, *, force_c
         logger.info("piezo %s is back", piezo.name)
 
 
-def _simulated_bench(config: StationConfig, stack: ExitStack) -> tuple[SimulatedInterferometer, Any]:
+def simulated_interferometer(config: StationConfig) -> tuple[SimulatedInterferometer, Any]:
+    """The simulated interferometer a ``sim://u3v`` station file describes, and its piezo device (or None).
+
+    Also used by the remote alignment-bench simulator, which serves them from another process.
+    """
     sim = config.camera_simulator
     optic_settings = config.optic
     assert optic_settings is not None  # parse_station_config requires [optic] for sim://u3v
@@ -151,6 +156,16 @@ def _truth_check(bench: SimulatedInterferometer | SimulatedShackHartmann | None,
     return None
 
 
+def _usb_backend(url: str, stack: ExitStack) -> UsbTcpBackend | None:
+    """The pyusb backend of a camera URL: libusb (None) for ``usb://``, the TCP bus for ``usbtcp://``."""
+    if not url.startswith("usbtcp://"):
+        return None
+    host, port, _ = parse_usbtcp_url(url)
+    backend = UsbTcpBackend(host, port)
+    stack.callback(backend.close)
+    return backend
+
+
 def _piezo_url(url: str, name: str) -> str:
     """``sim://mdt693b`` gets a device name so the station's bench and driver share one device."""
     scheme_and_model, _, rest = url.partition("?")
@@ -180,11 +195,11 @@ def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder:
         if config.station.kind == "shack-hartmann":
             bench = _simulated_shack_hartmann(config)
         else:
-            bench, piezo_device = _simulated_bench(config, stack)
+            bench, piezo_device = simulated_interferometer(config)
         camera = U3VCamera.open(backend=bench.backend, timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
     else:
-        camera = U3VCamera.open(serial=config.camera.serial, timeout_s=timeout,
-                                ring_capacity=config.camera.ring_capacity)
+        camera = U3VCamera.open(backend=_usb_backend(config.camera.url, stack), serial=config.camera.serial,
+                                timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
     stack.callback(camera.close)
     configure_camera(camera, config)
     devices = StationDevices(camera=camera, bench=bench, truth_check=_truth_check(bench, config))
