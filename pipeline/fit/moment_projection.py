@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .legendre_moments import Strip, legendre_table, strip_moments, gram_of, triangle_index
+from .legendre_moments import Strip, amplification, gram_of, legendre_table, strip_moments, triangle_index
+from .moment_float32 import FLOAT32_MAX_AMPLIFICATION, FLOAT32_MAX_DEGREE, Float32Pass
 from .projection import Downdate, Projected, check_frame, check_frames, refuse_nonfinite
 from .results import NanPolicy
 
@@ -74,6 +75,10 @@ class MomentProjection:
         self.n_samples = int(sum(o.size - np.count_nonzero(o) for o in self._outside))
         self._probe = np.unravel_index(
             np.array([_first_pixel(state.mask, s) for s in self._strips], dtype=np.intp), self.shape)
+        self._float32 = None  # float32 frames skip the float64 conversion where that stays exact enough
+        amplified = max(amplification(self._strip_transform(k)) for k in range(len(self._strips)))
+        if self._degree <= FLOAT32_MAX_DEGREE and amplified <= FLOAT32_MAX_AMPLIFICATION:
+            self._float32 = Float32Pass(self._strips, [~o for o in self._outside], self._rows, self._cols)
 
     @property
     def nbytes(self) -> int:
@@ -93,6 +98,12 @@ class MomentProjection:
         """Moments of one frame (see :class:`~wavestack.pipeline.fit.projection.Projected`)."""
         frame = check_frame(frame, self.shape)
         shift = self._shift(frame)
+        if self._float32 is not None and frame.dtype == np.float32:
+            single = np.float32(shift)
+            with np.errstate(invalid="ignore", over="ignore"):  # a non-finite sum goes to the float64 pass
+                moments, squares = self._float32.moments(frame, single)
+            if np.isfinite(squares) and np.isfinite(moments).all():
+                return self._projected(moments, squares, float(single), None)
         with np.errstate(invalid="ignore", over="ignore"):  # non-finite samples are found below
             moments, squares = self._moments(frame, shift, self._outside)
         if np.isfinite(squares) and np.isfinite(moments).all():
