@@ -81,6 +81,11 @@ class MomentProjection:
             self._float32 = Float32Pass(self._strips, [~o for o in self._outside], self._rows, self._cols)
 
     @property
+    def float32_pass(self) -> bool:
+        """Float32 frames are summed in float32 products (:mod:`~wavestack.pipeline.fit.moment_float32`)."""
+        return self._float32 is not None
+
+    @property
     def nbytes(self) -> int:
         """Bytes of the tables read once per frame besides the frame."""
         tables = sum(r.nbytes + c.nbytes + o.nbytes for r, c, o in zip(self._rows, self._cols, self._outside))
