@@ -1,10 +1,14 @@
 """The refit of a polynomial basis by separable Legendre moments: one pass over the frame.
 
 For each strip of the fitted pixels (:mod:`wavestack.pipeline.fit.legendre_moments`) the frame
-is read in row chunks that stay in cache: each chunk is moved to float64 less a shift, zeroed
-outside the fitted pixels, squared into ``|w|^2`` and multiplied by the strip's Legendre table
-(``P_v^T W``, a (D + 1)-row product); one more (D + 1)-wide product per strip gives the moments,
-and one (K x S L) product all of ``A^T w``. Nothing of size N x M exists.
+is read once in row chunks that stay in cache (:mod:`wavestack.pipeline.fit.moment_chunks`): each
+chunk is copied less a shift, zeroed outside the fitted pixels, squared into ``|w|^2`` and
+multiplied by the strip's column Legendre table; one more (D + 1)-wide product per strip gives the
+moments, and one (K x S L) product all of ``A^T w``. Nothing of size N x M exists. Float32 frames
+are summed in float32 products up to degree 7 (the moment_chunks docstring gives the precision),
+everything else in float64. A frame whose sums come out non-finite (a NaN or infinity inside the
+aperture, or overflow) is summed again by the masked float64 pass here, which finds the bad
+samples and applies the NaN policy.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .legendre_moments import Strip, amplification, gram_of, legendre_table, strip_moments, triangle_index
-from .moment_float32 import FLOAT32_MAX_AMPLIFICATION, FLOAT32_MAX_DEGREE, Float32Pass
+from .moment_chunks import FLOAT32_MAX_AMPLIFICATION, FLOAT32_MAX_DEGREE, ChunkedPass
 from .projection import Downdate, Projected, check_frame, check_frames, refuse_nonfinite
 from .results import NanPolicy
 
@@ -75,21 +79,22 @@ class MomentProjection:
         self.n_samples = int(sum(o.size - np.count_nonzero(o) for o in self._outside))
         self._probe = np.unravel_index(
             np.array([_first_pixel(state.mask, s) for s in self._strips], dtype=np.intp), self.shape)
-        self._float32 = None  # float32 frames skip the float64 conversion where that stays exact enough
+        inside = [~o for o in self._outside]
+        self._double = ChunkedPass(self._strips, inside, self._rows, self._cols, np.float64)
+        self._single = None  # float32 frames skip the float64 conversion where that stays exact enough
         amplified = max(amplification(self._strip_transform(k)) for k in range(len(self._strips)))
         if self._degree <= FLOAT32_MAX_DEGREE and amplified <= FLOAT32_MAX_AMPLIFICATION:
-            self._float32 = Float32Pass(self._strips, [~o for o in self._outside], self._rows, self._cols)
+            self._single = ChunkedPass(self._strips, inside, self._rows, self._cols, np.float32)
 
     @property
     def float32_pass(self) -> bool:
-        """Float32 frames are summed in float32 products (:mod:`~wavestack.pipeline.fit.moment_float32`)."""
-        return self._float32 is not None
+        """Float32 frames are summed in float32 products (:mod:`~wavestack.pipeline.fit.moment_chunks`)."""
+        return self._single is not None
 
     @property
     def nbytes(self) -> int:
-        """Bytes of the tables read once per frame besides the frame."""
-        tables = sum(r.nbytes + c.nbytes + o.nbytes for r, c, o in zip(self._rows, self._cols, self._outside))
-        return int(self._transform.nbytes + tables)
+        """Bytes of the tables read once per frame besides the frame (float64 pass)."""
+        return int(self._transform.nbytes + sum(r.nbytes for r in self._rows) + self._double.nbytes)
 
     def _strip_transform(self, k: int) -> NDArray[np.float64]:
         return self._transform[:, k * self._width:(k + 1) * self._width]
@@ -103,12 +108,12 @@ class MomentProjection:
         """Moments of one frame (see :class:`~wavestack.pipeline.fit.projection.Projected`)."""
         frame = check_frame(frame, self.shape)
         shift = self._shift(frame)
-        if self._float32 is not None and frame.dtype == np.float32:
-            single = np.float32(shift)
-            with np.errstate(invalid="ignore", over="ignore"):  # a non-finite sum goes to the float64 pass
-                moments, squares = self._float32.moments(frame, single)
-            if np.isfinite(squares) and np.isfinite(moments).all():
-                return self._projected(moments, squares, float(single), None)
+        chunked = self._single if self._single is not None and frame.dtype == np.float32 else self._double
+        rounded = float(chunked.dtype.type(shift))
+        with np.errstate(invalid="ignore", over="ignore"):  # a non-finite sum goes to the masked pass below
+            moments, squares = chunked.moments(frame, rounded)
+        if np.isfinite(squares) and np.isfinite(moments).all():
+            return self._projected(moments, squares, rounded, None)
         with np.errstate(invalid="ignore", over="ignore"):  # non-finite samples are found below
             moments, squares = self._moments(frame, shift, self._outside)
         if np.isfinite(squares) and np.isfinite(moments).all():

@@ -1,4 +1,4 @@
-"""The float32 pass of the moment refit: float32 frames, float32 products, float64 accumulation."""
+"""The chunked passes of the moment refit: float32 frames in float32 products, float64 accumulation."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from wavestack.pipeline import IllConditionedBasis, InvalidFrame, build_fitter, mode_list
 from wavestack.pipeline.fit.legendre_moments import Strip
-from wavestack.pipeline.fit.moment_float32 import FLOAT32_MAX_DEGREE, FLOAT32_TOLERANCE, plan_chunks
+from wavestack.pipeline.fit.moment_chunks import FLOAT32_MAX_DEGREE, FLOAT32_TOLERANCE, plan_chunks
 
 from .test_moments import _frame, _mask, _relative, _terms
 
