@@ -14,6 +14,7 @@ samples and applies the NaN policy.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,6 +102,9 @@ class MomentProjection:
 
     def _shift(self, frame: NDArray) -> float:
         values = frame[self._probe].astype(np.float64)  # no copy of a non-contiguous frame
+        total = float(values.sum())
+        if math.isfinite(total):  # the usual case, without np.mean's overhead (~10 us)
+            return total / values.size
         finite = values[np.isfinite(values)]
         return float(finite.mean()) if finite.size else 0.0
 
