@@ -47,6 +47,7 @@ ill-conditioned basis' own coefficients add its noise gain, as they do to the fr
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -136,8 +137,8 @@ class ChunkedPass:
     dtype : numpy dtype
         float32 (float32 frames, low degrees: see the module docstring) or float64.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> from wavestack.pipeline.fit.legendre_moments import Strip, legendre_table
     >>> strip = Strip(0, 4, 0, 5)
@@ -157,8 +158,10 @@ class ChunkedPass:
         # Column-major tables: gemm with a (width, D + 1) right factor ran 5-10% faster (measured).
         self._cols = [np.asfortranarray(t, dtype=self.dtype) for t in col_tables]
         self._chunks = [plan_chunks(i, s, _CHUNK_BYTES, self.dtype.itemsize) for i, s in zip(inside, strips)]
-        largest = max((c.row1 - c.row0) * (c.col1 - c.col0) for chunks in self._chunks for c in chunks)
-        self._work = np.empty(largest, dtype=self.dtype)
+        self._largest = max((c.row1 - c.row0) * (c.col1 - c.col0) for chunks in self._chunks for c in chunks)
+        # One buffer per thread, kept between frames: a fresh 256 KB array would be mapped (and
+        # page-faulted) anew each frame, and threads sharing one fitter must not share a buffer.
+        self._buffers = threading.local()
 
     @property
     def nbytes(self) -> int:
@@ -176,7 +179,9 @@ class ChunkedPass:
         size = self._cols[0].shape[1]
         moments = np.empty((len(self._strips), size, size))
         squares = 0.0
-        work = self._work
+        work = getattr(self._buffers, "work", None)
+        if work is None:
+            work = self._buffers.work = np.empty(self._largest, dtype=self.dtype)
         for k, (strip, rows, cols, chunks) in enumerate(zip(self._strips, self._rows, self._cols, self._chunks)):
             partial = np.zeros((strip.row1 - strip.row0, size), dtype=self.dtype)
             row_squares = np.zeros(strip.row1 - strip.row0, dtype=self.dtype)

@@ -140,3 +140,18 @@ def test_chunks_cover_each_fitted_pixel_once_and_zero_the_rest(rows, cols, densi
         zeroed[here] += block
     np.testing.assert_array_equal(covered, inside.astype(int))
     assert not (zeroed & inside).any() and zeroed.max() <= 1
+
+
+def test_threads_sharing_a_fitter_do_not_share_its_buffers() -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(11)
+    mask = _mask("disk", 512, rng)  # many chunks: the threads' passes overlap
+    fitter = build_fitter(mask, modes=15)
+    frames = [_frame(fitter, mask, rng).astype(np.float32) for _ in range(4)]
+    alone = [fitter.fit(frame).coefficients for frame in frames]
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        for _ in range(10):
+            together = list(pool.map(lambda frame: fitter.fit(frame).coefficients, frames))
+            for a, b in zip(alone, together):
+                np.testing.assert_array_equal(a, b)
