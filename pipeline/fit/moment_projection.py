@@ -113,11 +113,9 @@ class MomentProjection:
         frame = check_frame(frame, self.shape)
         shift = self._shift(frame)
         chunked = self._single if self._single is not None and frame.dtype == np.float32 else self._double
-        rounded = float(chunked.dtype.type(shift))
-        with np.errstate(invalid="ignore", over="ignore"):  # a non-finite sum goes to the masked pass below
-            moments, squares = chunked.moments(frame, rounded)
-        if np.isfinite(squares) and np.isfinite(moments).all():
-            return self._projected(moments, squares, rounded, None)
+        projected = self._chunked(chunked, frame, shift)
+        if projected is not None:
+            return projected
         with np.errstate(invalid="ignore", over="ignore"):  # non-finite samples are found below
             moments, squares = self._moments(frame, shift, self._outside)
         if np.isfinite(squares) and np.isfinite(moments).all():
@@ -130,6 +128,15 @@ class MomentProjection:
         logger.debug("omitting %d non-finite samples by downdating the normal equations", count)
         moments, squares = self._moments(frame, shift, [o | b for o, b in zip(self._outside, bad)])
         return self._projected(moments, squares, shift, self._downdate(bad, count))
+
+    def _chunked(self, chunked: ChunkedPass, frame: NDArray, shift: float) -> Projected | None:
+        """One chunked pass, or None when its sums are not finite (the masked pass decides)."""
+        rounded = float(chunked.dtype.type(shift))
+        with np.errstate(invalid="ignore", over="ignore"):
+            moments, squares = chunked.moments(frame, rounded)
+        if np.isfinite(squares) and np.isfinite(moments).all():
+            return self._projected(moments, squares, rounded, None)
+        return None
 
     def _projected(self, moments: NDArray, squares: float, shift: float, downdate: Downdate | None) -> Projected:
         vector = moments.reshape(len(self._strips), -1)[:, self._index].reshape(-1)
@@ -159,11 +166,14 @@ class MomentProjection:
     def project_many(self, frames: NDArray, keep_samples: bool = False) -> list[Projected | None]:
         """Moments of a stack of frames, one product per chunk of rows for the whole stack.
 
-        Frames with a non-finite sample inside the aperture come back as None (the caller fits
+        Float32 stacks that the float32 pass serves go through it frame by frame (so that
+        ``fit_many`` gives what ``fit`` gives; that pass is as fast per frame). Frames with a non-finite sample inside the aperture come back as None (the caller fits
         them one by one, with its NaN policy). ``keep_samples`` is accepted for the interface's
         sake: a moment residual reads the frame again.
         """
         frames = check_frames(frames, self.shape)
+        if self._single is not None and frames.dtype == np.float32:  # the same pass as fit(), frame by frame
+            return [self._chunked(self._single, frame, self._shift(frame)) for frame in frames]
         with np.errstate(invalid="ignore", over="ignore"):  # frames with non-finite samples come back None
             return self._project_many(frames)
 

@@ -155,3 +155,17 @@ def test_threads_sharing_a_fitter_do_not_share_its_buffers() -> None:
             together = list(pool.map(lambda frame: fitter.fit(frame).coefficients, frames))
             for a, b in zip(alone, together):
                 np.testing.assert_array_equal(a, b)
+
+
+def test_fit_many_of_float32_frames_equals_fit_on_each() -> None:
+    rng = np.random.default_rng(12)
+    mask = _mask("disk", 64, rng)
+    fitter = build_fitter(mask, modes=21, remove="ptt")
+    assert _uses_float32(fitter)
+    frames = np.stack([_frame(fitter, mask, rng, offset=k) for k in range(4)]).astype(np.float32)
+    frames[2].reshape(-1)[np.flatnonzero(mask)[:3]] = np.nan  # fitted on its own under the NaN policy
+    batch = fitter.fit_many(frames, nan_policy="omit")
+    for frame, result in zip(frames, batch):
+        single = fitter.fit(frame, nan_policy="omit")
+        np.testing.assert_array_equal(result.coefficients, single.coefficients)
+        assert result.residual_rms == single.residual_rms and result.nan_count == single.nan_count
