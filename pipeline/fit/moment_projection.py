@@ -1,21 +1,27 @@
 """The refit of a polynomial basis by separable Legendre moments: one pass over the frame.
 
 For each strip of the fitted pixels (:mod:`wavestack.pipeline.fit.legendre_moments`) the frame
-is read in row chunks that stay in cache: each chunk is moved to float64 less a shift, zeroed
-outside the fitted pixels, squared into ``|w|^2`` and multiplied by the strip's Legendre table
-(``P_v^T W``, a (D + 1)-row product); one more (D + 1)-wide product per strip gives the moments,
-and one (K x S L) product all of ``A^T w``. Nothing of size N x M exists.
+is read once in row chunks that stay in cache (:mod:`wavestack.pipeline.fit.moment_chunks`): each
+chunk is copied less a shift, zeroed outside the fitted pixels, squared into ``|w|^2`` and
+multiplied by the strip's column Legendre table; one more (D + 1)-wide product per strip gives the
+moments, and one (K x S L) product all of ``A^T w``. Nothing of size N x M exists. Float32 frames
+are summed in float32 products up to degree 7 (the moment_chunks docstring gives the precision),
+everything else in float64. A frame whose sums come out non-finite (a NaN or infinity inside the
+aperture, or overflow) is summed again by the masked float64 pass here, which finds the bad
+samples and applies the NaN policy.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .legendre_moments import Strip, legendre_table, strip_moments, gram_of, triangle_index
+from .legendre_moments import Strip, amplification, gram_of, legendre_table, strip_moments, triangle_index
+from .moment_chunks import FLOAT32_MAX_AMPLIFICATION, FLOAT32_MAX_DEGREE, ChunkedPass
 from .projection import Downdate, Projected, check_frame, check_frames, refuse_nonfinite
 from .results import NanPolicy
 
@@ -74,18 +80,31 @@ class MomentProjection:
         self.n_samples = int(sum(o.size - np.count_nonzero(o) for o in self._outside))
         self._probe = np.unravel_index(
             np.array([_first_pixel(state.mask, s) for s in self._strips], dtype=np.intp), self.shape)
+        inside = [~o for o in self._outside]
+        self._double = ChunkedPass(self._strips, inside, self._rows, self._cols, np.float64)
+        self._single = None  # float32 frames skip the float64 conversion where that stays exact enough
+        amplified = max(amplification(self._strip_transform(k)) for k in range(len(self._strips)))
+        if self._degree <= FLOAT32_MAX_DEGREE and amplified <= FLOAT32_MAX_AMPLIFICATION:
+            self._single = ChunkedPass(self._strips, inside, self._rows, self._cols, np.float32)
+
+    @property
+    def float32_pass(self) -> bool:
+        """Float32 frames are summed in float32 products (:mod:`~wavestack.pipeline.fit.moment_chunks`)."""
+        return self._single is not None
 
     @property
     def nbytes(self) -> int:
-        """Bytes of the tables read once per frame besides the frame."""
-        tables = sum(r.nbytes + c.nbytes + o.nbytes for r, c, o in zip(self._rows, self._cols, self._outside))
-        return int(self._transform.nbytes + tables)
+        """Bytes of the tables read once per frame besides the frame (float64 pass)."""
+        return int(self._transform.nbytes + sum(r.nbytes for r in self._rows) + self._double.nbytes)
 
     def _strip_transform(self, k: int) -> NDArray[np.float64]:
         return self._transform[:, k * self._width:(k + 1) * self._width]
 
     def _shift(self, frame: NDArray) -> float:
         values = frame[self._probe].astype(np.float64)  # no copy of a non-contiguous frame
+        total = float(values.sum())
+        if math.isfinite(total):  # the usual case, without np.mean's overhead (~10 us)
+            return total / values.size
         finite = values[np.isfinite(values)]
         return float(finite.mean()) if finite.size else 0.0
 
@@ -93,6 +112,10 @@ class MomentProjection:
         """Moments of one frame (see :class:`~wavestack.pipeline.fit.projection.Projected`)."""
         frame = check_frame(frame, self.shape)
         shift = self._shift(frame)
+        chunked = self._single if self._single is not None and frame.dtype == np.float32 else self._double
+        projected = self._chunked(chunked, frame, shift)
+        if projected is not None:
+            return projected
         with np.errstate(invalid="ignore", over="ignore"):  # non-finite samples are found below
             moments, squares = self._moments(frame, shift, self._outside)
         if np.isfinite(squares) and np.isfinite(moments).all():
@@ -105,6 +128,15 @@ class MomentProjection:
         logger.debug("omitting %d non-finite samples by downdating the normal equations", count)
         moments, squares = self._moments(frame, shift, [o | b for o, b in zip(self._outside, bad)])
         return self._projected(moments, squares, shift, self._downdate(bad, count))
+
+    def _chunked(self, chunked: ChunkedPass, frame: NDArray, shift: float) -> Projected | None:
+        """One chunked pass, or None when its sums are not finite (the masked pass decides)."""
+        rounded = float(chunked.dtype.type(shift))
+        with np.errstate(invalid="ignore", over="ignore"):
+            moments, squares = chunked.moments(frame, rounded)
+        if np.isfinite(squares) and np.isfinite(moments).all():
+            return self._projected(moments, squares, rounded, None)
+        return None
 
     def _projected(self, moments: NDArray, squares: float, shift: float, downdate: Downdate | None) -> Projected:
         vector = moments.reshape(len(self._strips), -1)[:, self._index].reshape(-1)
@@ -134,11 +166,14 @@ class MomentProjection:
     def project_many(self, frames: NDArray, keep_samples: bool = False) -> list[Projected | None]:
         """Moments of a stack of frames, one product per chunk of rows for the whole stack.
 
-        Frames with a non-finite sample inside the aperture come back as None (the caller fits
+        Float32 stacks that the float32 pass serves go through it frame by frame (so that
+        ``fit_many`` gives what ``fit`` gives; that pass is as fast per frame). Frames with a non-finite sample inside the aperture come back as None (the caller fits
         them one by one, with its NaN policy). ``keep_samples`` is accepted for the interface's
         sake: a moment residual reads the frame again.
         """
         frames = check_frames(frames, self.shape)
+        if self._single is not None and frames.dtype == np.float32:  # the same pass as fit(), frame by frame
+            return [self._chunked(self._single, frame, self._shift(frame)) for frame in frames]
         with np.errstate(invalid="ignore", over="ignore"):  # frames with non-finite samples come back None
             return self._project_many(frames)
 

@@ -158,10 +158,10 @@ class NormalEquations:
         b_basis = b[:m]
         removed = np.zeros(0)
         if self._has_removal:
-            removed = scipy.linalg.cho_solve(self._removal_factor, b[m:], check_finite=False)
+            removed = _cho_solve(self._removal_factor, b[m:])
             b_basis = b_basis - self._cross @ removed
             ww = ww - float(removed @ b[m:])
-        basis = scipy.linalg.cho_solve(self._basis_factor, b_basis, check_finite=False)
+        basis = _cho_solve(self._basis_factor, b_basis)
         residual_sq = max(ww - float(basis @ b_basis), 0.0)
         return SolvedFrame(basis=basis, removed=removed, residual_sq=residual_sq)
 
@@ -202,3 +202,13 @@ class NormalEquations:
             self.n_basis,
             self.n_samples - rows.shape[0],
         )
+
+
+def _cho_solve(factor: tuple[NDArray[np.float64], bool], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``scipy.linalg.cho_solve`` without its argument checks: LAPACK dpotrs, as it calls (the
+    checks cost ~10 us per frame, 3-5% of a 36-mode moment refit at 1024 x 1024)."""
+    solution, info = scipy.linalg.lapack.dpotrs(factor[0], b, lower=factor[1])
+    if info != 0:
+        raise ValueError(f"b: LAPACK dpotrs failed with info={info}")
+    return solution
+
