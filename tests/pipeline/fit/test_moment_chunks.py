@@ -12,7 +12,9 @@ from wavestack.pipeline import IllConditionedBasis, InvalidFrame, build_fitter, 
 from wavestack.pipeline.fit.legendre_moments import Strip
 from wavestack.pipeline.fit.moment_chunks import FLOAT32_MAX_DEGREE, FLOAT32_TOLERANCE, plan_chunks
 
-from .test_moments import _frame, _mask, _relative, _terms
+from moment_pairs import _relative, _terms
+
+from .test_moments import _frame, _mask
 
 
 def _error(a: np.ndarray, b: np.ndarray, scale: float) -> float:
