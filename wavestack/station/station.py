@@ -201,8 +201,8 @@ class Station:
 
     def _read_set(self, stop: threading.Event) -> tuple[Frame, ...] | None:
         """The next set within ``frame_timeout_s``, awaited in slices with the PLC kept alive; None if stopped."""
-        if self._source is None:
-            raise self._not_back
+        if self._source is None:  # a fresh error: each raise of one instance would add to its traceback
+            raise DeviceDisconnected(self._not_back.device, self._not_back.detail)
         timeout_s = self._config.station.frame_timeout_s
         deadline = time.monotonic() + timeout_s
         while not stop.is_set():
