@@ -7,12 +7,14 @@ import itertools
 import logging
 import threading
 import time
+import traceback
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from wavestack.drivers.errors import DeviceDisconnected
 from wavestack.simulators.optic import ApertureShape, TestOptic
 from wavestack.config import StationConfig, load_station_config
 from wavestack.recording import RecordingReader, StationRecorder, open_recording, recorded_config, replay
@@ -141,6 +143,20 @@ def test_an_unplugged_camera_gives_invalid_results_then_recovers(station_factory
     last = check_counts(records, 5, ids_from_zero=False)
     assert last.frames.acquired > results[2].counters.frames.acquired
     assert summary.counters.sets.processed == sum(1 for record in records if record.frames) < summary.results
+
+
+def test_each_read_without_a_source_raises_a_fresh_error(station_factory) -> None:
+    # issue 13: re-raising one stored error added every raise's frames to its traceback, without bound
+    station, _ = station_factory(_config())
+    station._retire_source()  # what a lost camera leaves until it is back
+    errors = []
+    for _ in range(3):
+        try:
+            station._read_set(threading.Event())
+        except DeviceDisconnected as error:
+            errors.append(error)
+    depths = [len(traceback.extract_tb(error.__traceback__)) for error in errors]
+    assert len({id(error) for error in errors}) == 3 and len(set(depths)) == 1, depths
 
 
 def test_the_plc_sees_only_clamped_rate_limited_commands_and_a_heartbeat(station_factory) -> None:
