@@ -15,8 +15,9 @@ fitter builds on the fitter cache's worker. On a simulated camera the devices br
 A device lost while running does not end the run: the result says so (invalid, never forwarded),
 the station reopens the camera or the piezo with a capped back-off
 (:func:`~wavestack.station.devices.reconnect_devices`), re-applies its configuration and goes on.
-The lost connection's source is retired (what it still held counts as dropped) and a new source
-counts on from there, so the run's frame and set counters
+The lost connection's source is retired (what it still held counts as dropped), the reference
+cycles its errors left are collected (:meth:`~wavestack.station.heap.HeapRelease.after_fault`: they
+hold its frames), and a new source counts on from there, so the run's frame and set counters
 (:class:`~wavestack.station.counters.Counters`) add up across reconnects and only grow. Counts
 that do not add up (a bug) make the result invalid, with the reason, logged at ERROR; the result
 carries the last consistent counters.
@@ -172,7 +173,11 @@ class Station:
         backoff_s = _FIRST_BACKOFF_S
         if self._source is not None:
             self._start_source()
+        fault_handled = False
         while not stop.is_set():
+            if fault_handled:  # outside the except block: its error (and the cycles it is in) is gone now
+                self._heap.after_fault(time.monotonic())
+                fault_handled = False
             if max_results is not None and index >= max_results:
                 break
             if duration_s is not None and time.monotonic() - started >= duration_s:
@@ -187,6 +192,7 @@ class Station:
                 failures += error.device == self._devices.camera.name  # the camera's own, in a row
                 self._recover(stop, backoff_s, force_camera=failures > 2)
                 backoff_s = min(backoff_s * 2, self._config.station.reconnect_max_s)
+                fault_handled = True
                 continue
             if frames is None:  # stopped while waiting
                 break
