@@ -25,9 +25,10 @@ frames keep their callers' locals alive: the acquisition thread's half-read set,
 held frames, ~20-60 MB per camera or piezo fault on the default station (``gc.garbage`` in issue
 13's fourth session). Only the cyclic collector frees such a cycle, and it runs when *container*
 allocations pile up, which a loop of a few numpy arrays per result rarely does: the soak saw the
-garbage of a few minutes of faults (+130 MB) freed at once by one collection. A full collection
-costs milliseconds to a few hundred, once per handled fault, when the station produces no valid
-result anyway.
+garbage of a few minutes of faults (+130 MB) freed at once by one collection. The station
+collects once per outage, after the first result when its devices are back: a full collection
+of ~113,000 objects took 310-410 ms on the loaded 2-core machine (load 15), too long to repeat at
+every lost-device cycle of a flapping camera.
 """
 
 from __future__ import annotations
@@ -115,7 +116,7 @@ class HeapRelease:
         return True
 
     def after_fault(self, now_s: float) -> None:
-        """A device fault was handled: collect the reference cycles its errors left, then trim (if trimming).
+        """The devices are back after a fault: collect the reference cycles its errors left, then trim (if trimming).
 
         Parameters
         ----------

@@ -15,9 +15,9 @@ fitter builds on the fitter cache's worker. On a simulated camera the devices br
 A device lost while running does not end the run: the result says so (invalid, never forwarded),
 the station reopens the camera or the piezo with a capped back-off
 (:func:`~wavestack.station.devices.reconnect_devices`), re-applies its configuration and goes on.
-The lost connection's source is retired (what it still held counts as dropped), the reference
-cycles its errors left are collected (:meth:`~wavestack.station.heap.HeapRelease.after_fault`: they
-hold its frames), and a new source counts on from there, so the run's frame and set counters
+The lost connection's source is retired (what it still held counts as dropped) and a new source
+counts on from there (after its first result the reference cycles the fault's errors left are
+collected: :meth:`~wavestack.station.heap.HeapRelease.after_fault`), so the run's frame and set counters
 (:class:`~wavestack.station.counters.Counters`) add up across reconnects and only grow. Counts
 that do not add up (a bug) make the result invalid, with the reason, logged at ERROR; the result
 carries the last consistent counters.
@@ -173,11 +173,8 @@ class Station:
         backoff_s = _FIRST_BACKOFF_S
         if self._source is not None:
             self._start_source()
-        fault_handled = False
+        outage = False  # a device fault was handled and no set has come since
         while not stop.is_set():
-            if fault_handled:  # outside the except block: its error (and the cycles it is in) is gone now
-                self._heap.after_fault(time.monotonic())
-                fault_handled = False
             if max_results is not None and index >= max_results:
                 break
             if duration_s is not None and time.monotonic() - started >= duration_s:
@@ -192,7 +189,7 @@ class Station:
                 failures += error.device == self._devices.camera.name  # the camera's own, in a row
                 self._recover(stop, backoff_s, force_camera=failures > 2)
                 backoff_s = min(backoff_s * 2, self._config.station.reconnect_max_s)
-                fault_handled = True
+                outage = True
                 continue
             if frames is None:  # stopped while waiting
                 break
@@ -202,7 +199,11 @@ class Station:
             index += 1
             tally.add(record.result)
             del record, frames  # the set's arrays are freed before the heap is trimmed
-            self._heap.maybe_release(time.monotonic())
+            if outage:  # back, the result out: once per outage, collect the cycles its errors were in
+                self._heap.after_fault(time.monotonic())
+                outage = False
+            else:
+                self._heap.maybe_release(time.monotonic())
         return tally.summary(index, time.monotonic() - started, self._counters()[0])
 
     def _read_set(self, stop: threading.Event) -> tuple[Frame, ...] | None:
