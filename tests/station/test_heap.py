@@ -15,6 +15,21 @@ def test_trims_at_most_once_per_period() -> None:
     assert len(calls) == 3
 
 
+def test_after_a_fault_cycles_are_collected_then_the_heap_trimmed_as_this_periods_trim() -> None:
+    events: list[str] = []
+    release = HeapRelease(2.0, trim=lambda: events.append("trim"), collect=lambda: events.append("collect"))
+    release.after_fault(10.0)
+    assert events == ["collect", "trim"]
+    assert [release.maybe_release(t) for t in (11.0, 12.0)] == [False, True]
+
+
+def test_after_a_fault_cycles_are_collected_also_without_trimming() -> None:
+    events: list[str] = []
+    release = HeapRelease(0.0, trim=lambda: events.append("trim"), collect=lambda: events.append("collect"))
+    release.after_fault(1.0)
+    assert events == ["collect"]
+
+
 def test_a_zero_period_never_trims() -> None:
     calls: list[int] = []
     release = HeapRelease(0.0, trim=lambda: calls.append(1))

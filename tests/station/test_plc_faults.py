@@ -10,6 +10,7 @@ after it.
 
 from __future__ import annotations
 
+import gc
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -21,7 +22,7 @@ import pytest
 from wavestack.config import StationConfig, load_station_config
 from wavestack.drivers.plc import decode_float32_array
 from wavestack.simulators.plc import PlcSimulator
-from wavestack.station import CycleRecord, StationResult
+from wavestack.station import CycleRecord, InterferometerOutcome, StationResult
 
 SMALL = Path(__file__).resolve().parents[1] / "configs" / "station-small.toml"
 MAX_REMOVAL_NM, MAX_STEP_NM = 20.0, 5.0
@@ -53,15 +54,17 @@ class _Run:
 
 
 def _run(station, sim: PlcSimulator, switch_on: Callable[[], None], switch_off: Callable[[], None] | None,
-         lasting: int) -> _Run:
+         lasting: int, probe: Callable[[int], None] | None = None) -> _Run:
     """Run the station; switch the fault on at ``FAULT_AT`` and off ``lasting`` results later; stop once
-    two commands were sent after it (or at ``MAX_RESULTS``)."""
+    two commands were sent after it (or at ``MAX_RESULTS``). ``probe`` gets each result's index."""
     run = _Run()
     stop = threading.Event()
 
     def on_result(record: CycleRecord) -> None:
         result = record.result
         run.results.append(result)
+        if probe is not None:
+            probe(result.index)
         run.request_marks.append(sim.request_count)
         if result.index == FAULT_AT:
             run.fault_on, run.trips_before = sim.request_count, sim.watchdog_trips
@@ -162,9 +165,23 @@ def test_no_command_reaches_a_plc_whose_heartbeat_echo_is_frozen(station_factory
     config = _config()
     station, devices = station_factory(config)
     sim = devices.plc_simulator
-    run = _run(station, sim, lambda: setattr(sim.faults, "freeze_heartbeat_echo", True),
-               lambda: setattr(sim.faults, "freeze_heartbeat_echo", False), 8)
+    live: list[int] = []  # outcomes alive at each result around the fault, the cyclic GC off
+
+    def count_outcomes(index: int) -> None:
+        if FAULT_AT <= index <= FAULT_AT + 10:
+            live.append(sum(1 for o in gc.get_objects() if isinstance(o, InterferometerOutcome)))
+
+    gc.disable()  # only reference counting frees: what a cycle holds stays
+    try:
+        run = _run(station, sim, lambda: setattr(sim.faults, "freeze_heartbeat_echo", True),
+                   lambda: setattr(sim.faults, "freeze_heartbeat_echo", False), 8, probe=count_outcomes)
+    finally:
+        gc.enable()
     _check_wire_and_results(run, sim, config)
+    # each stale heartbeat used to keep its cycle's frame (the set, the outcome) alive in a reference
+    # cycle until a GC pass, one more outcome per result (0, 1, 2, ... 8; ~10 MB each on the default
+    # station, issue 13's soak); now at most the current and the previous one
+    assert len(live) == 11 and max(live) <= 2, str(live)
     # the echo may trail by heartbeat_echo_max_lag beats; from the first result that shows the PLC not
     # scanning until the echo resumes, not one command goes out
     detected = next(k for k, r in enumerate(run.results)

@@ -16,7 +16,8 @@ A device lost while running does not end the run: the result says so (invalid, n
 the station reopens the camera or the piezo with a capped back-off
 (:func:`~wavestack.station.devices.reconnect_devices`), re-applies its configuration and goes on.
 The lost connection's source is retired (what it still held counts as dropped) and a new source
-counts on from there, so the run's frame and set counters
+counts on from there (after its first result the reference cycles the fault's errors left are
+collected: :meth:`~wavestack.station.heap.HeapRelease.after_fault`), so the run's frame and set counters
 (:class:`~wavestack.station.counters.Counters`) add up across reconnects and only grow. Counts
 that do not add up (a bug) make the result invalid, with the reason, logged at ERROR; the result
 carries the last consistent counters.
@@ -172,6 +173,7 @@ class Station:
         backoff_s = _FIRST_BACKOFF_S
         if self._source is not None:
             self._start_source()
+        outage = False  # a device fault was handled and no set has come since
         while not stop.is_set():
             if max_results is not None and index >= max_results:
                 break
@@ -187,6 +189,7 @@ class Station:
                 failures += error.device == self._devices.camera.name  # the camera's own, in a row
                 self._recover(stop, backoff_s, force_camera=failures > 2)
                 backoff_s = min(backoff_s * 2, self._config.station.reconnect_max_s)
+                outage = True
                 continue
             if frames is None:  # stopped while waiting
                 break
@@ -196,13 +199,17 @@ class Station:
             index += 1
             tally.add(record.result)
             del record, frames  # the set's arrays are freed before the heap is trimmed
-            self._heap.maybe_release(time.monotonic())
+            if outage:  # back, the result out: once per outage, collect the cycles its errors were in
+                self._heap.after_fault(time.monotonic())
+                outage = False
+            else:
+                self._heap.maybe_release(time.monotonic())
         return tally.summary(index, time.monotonic() - started, self._counters()[0])
 
     def _read_set(self, stop: threading.Event) -> tuple[Frame, ...] | None:
         """The next set within ``frame_timeout_s``, awaited in slices with the PLC kept alive; None if stopped."""
-        if self._source is None:
-            raise self._not_back
+        if self._source is None:  # a fresh error: each raise of one instance would add to its traceback
+            raise DeviceDisconnected(self._not_back.device, self._not_back.detail)
         timeout_s = self._config.station.frame_timeout_s
         deadline = time.monotonic() + timeout_s
         while not stop.is_set():

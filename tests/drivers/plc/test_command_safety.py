@@ -5,7 +5,9 @@ Every check decodes what the simulated PLC received (``sim.requests``) or took (
 
 from __future__ import annotations
 
+import gc
 import time
+import weakref
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -142,6 +144,48 @@ def test_no_command_while_the_heartbeat_echo_is_frozen() -> None:
         link.heartbeat(timeout_s=1.0)  # echoed again: scanning
         _send(link, 1.0)
         assert len(_commands(sim)) == 1
+
+
+class _Sentinel:
+    """Stands for what a caller holds in its locals (the station: its set of camera frames, ~10 MB)."""
+
+
+def _caller_kept_alive(call: Callable[[], object], expected: type[Exception]) -> bool:
+    """Whether ``call`` raising ``expected`` keeps its caller's locals alive once the caller returned.
+
+    The cyclic garbage collector is off meanwhile, so only a reference cycle can keep them: an error
+    that a frame of its own traceback still names (``raise stale`` from a local) does.
+    """
+    def caller() -> weakref.ref[_Sentinel]:
+        held = _Sentinel()
+        try:
+            call()
+        except expected:
+            pass
+        else:
+            raise AssertionError(f"expected {expected.__name__}")
+        return weakref.ref(held)
+
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return caller()() is not None
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def test_refusals_leave_no_reference_cycle_holding_the_callers_frames() -> None:
+    # issue 13: each stale heartbeat kept the station's cycle (frames, result) alive until a GC pass
+    with plc() as (sim, link):
+        ready(link)
+        link.heartbeat(timeout_s=1.0)
+        sim.faults.freeze_heartbeat_echo = True
+        for _ in range(TIMING.heartbeat_echo_max_lag):
+            link.heartbeat(timeout_s=1.0)
+        assert not _caller_kept_alive(lambda: link.heartbeat(timeout_s=1.0), HeartbeatEchoStale)
+        assert not _caller_kept_alive(lambda: _send(link, 1.0), PlcNotReady)  # the stale-echo refusal
+        assert _commands(sim) == []
 
 
 def test_no_command_in_the_echo_lag_window_after_the_program_stops() -> None:
