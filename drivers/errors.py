@@ -24,6 +24,27 @@ class DeviceError(Exception):
         self.detail = message
 
 
+def renewed(error: DeviceError) -> DeviceError:
+    """A new error of ``error``'s type, text and attributes, with no traceback yet.
+
+    For an error kept to be raised again later (a closed frame ring's reason): raising the kept
+    object itself grows its traceback at every raise, and that traceback names the frame that
+    keeps the object, a reference cycle that holds the callers' locals (frames of images) until
+    the cyclic garbage collector happens to run (issue 13's soak).
+
+    Example
+    -------
+    >>> kept = DeviceDisconnected("camera", "unplugged")
+    >>> again = renewed(kept)
+    >>> again is not kept and type(again) is DeviceDisconnected and str(again) == str(kept)
+    True
+    """
+    fresh = type(error).__new__(type(error))
+    Exception.__init__(fresh, *error.args)
+    fresh.__dict__.update(error.__dict__)
+    return fresh
+
+
 class DeviceTimeout(DeviceError, TimeoutError):
     """The device did not answer within the call's timeout."""
 

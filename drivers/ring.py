@@ -28,7 +28,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
-from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout
+from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, renewed
 
 T = TypeVar("T")
 logger = logging.getLogger(__name__)
@@ -195,7 +195,9 @@ class FrameRing(Generic[T]):
         with self._condition:
             while not self._items:
                 if self._closed:
-                    raise self._close_error or DeviceDisconnected(self._name, "frame ring closed; no more frames")
+                    if self._close_error is not None:  # a new object each time: no growing traceback, no cycle
+                        raise renewed(self._close_error)
+                    raise DeviceDisconnected(self._name, "frame ring closed; no more frames")
                 if fail_after_loss is not None and self._losses > fail_after_loss:
                     raise FrameLost(self._name, f"{self._losses - fail_after_loss} frame(s) lost on the way "
                                                 "(damaged or incomplete block); expected a whole frame")

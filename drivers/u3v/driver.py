@@ -388,7 +388,10 @@ class U3VCamera:
                 failure = failure or exc
             unlock_transport_layer(self._link.control, self._link.features, deadline, self._name)
         if failure is not None and not isinstance(failure, DeviceDisconnected):
-            raise failure
+            try:
+                raise failure
+            finally:  # no local naming the error: a cycle with this frame (drivers.errors.renewed)
+                del failure
 
     # ------------------------------------------------------------------------------ life cycle
     def _release(self) -> None:

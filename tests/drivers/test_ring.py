@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import gc
 import threading
 import time
+import weakref
 
 import pytest
 from hypothesis import given, settings
@@ -67,6 +69,39 @@ def test_close_lets_the_consumer_drain_then_raises_the_close_error_once_per_call
         ring.get(0.0)
     with pytest.raises(DeviceDisconnected):
         ring.put(2)
+
+
+def test_the_close_error_raised_again_holds_no_caller_alive() -> None:
+    """Each raise is a new error: the kept one's traceback does not grow and no cycle keeps the
+    callers' locals (a set of camera frames in the station) until the cyclic collector runs."""
+    ring: FrameRing[int] = FrameRing(4, RingPolicy.OLDEST_FIRST, name="cam")
+    ring.close(DeviceDisconnected("cam", "unplugged"))
+
+    class Frames:  # stands for a caller's set of images
+        pass
+
+    def caller() -> weakref.ref:
+        frames = Frames()
+        try:
+            ring.get(0.0)
+        except DeviceDisconnected:
+            pass
+        return weakref.ref(frames)
+
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        kept = [caller() for _ in range(3)]
+        assert all(ref() is None for ref in kept)  # freed by reference counts alone
+    finally:
+        if enabled:
+            gc.enable()
+    errors = []
+    for _ in range(2):
+        with pytest.raises(DeviceDisconnected, match="unplugged") as caught:
+            ring.get(0.0)
+        errors.append(caught.value)
+    assert errors[0] is not errors[1] and errors[0].device == "cam"
 
 
 def test_close_wakes_a_waiting_consumer() -> None:
