@@ -359,9 +359,7 @@ class U3VCamera:
 
     def stop(self, timeout_s: float | None = None) -> None:
         """AcquisitionStop, stop and join the reader thread, disable the stream, clear TLParamsLocked.
-        Idempotent.
-
-        After an unplug only the thread is joined. Pending frames stay readable.
+        Idempotent. After an unplug only the thread is joined. Pending frames stay readable.
 
         Raises
         ------
@@ -390,8 +388,8 @@ class U3VCamera:
         if failure is not None and not isinstance(failure, DeviceDisconnected):
             try:
                 raise failure
-            finally:  # no local naming the error: a cycle with this frame (drivers.errors.renewed)
-                del failure
+            finally:
+                del failure  # no local naming the error: a cycle with this frame (errors.renewed)
 
     # ------------------------------------------------------------------------------ life cycle
     def _release(self) -> None:
