@@ -37,7 +37,7 @@ import time
 from dataclasses import asdict, dataclass, field, replace
 
 from wavestack.config import StationConfig
-from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout
+from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, renewed
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import WaitTimeout
 from wavestack.station.counters import Counters
@@ -209,7 +209,7 @@ class Station:
     def _read_set(self, stop: threading.Event) -> tuple[Frame, ...] | None:
         """The next set within ``frame_timeout_s``, awaited in slices with the PLC kept alive; None if stopped."""
         if self._source is None:  # a fresh error: each raise of one instance would add to its traceback
-            raise DeviceDisconnected(self._not_back.device, self._not_back.detail)
+            raise renewed(self._not_back)
         timeout_s = self._config.station.frame_timeout_s
         deadline = time.monotonic() + timeout_s
         while not stop.is_set():
