@@ -4,23 +4,21 @@ The moment refit (:mod:`wavestack.pipeline.fit.moment_projection`) needs, per st
 pixels, the moments ``P_v^T (W - s) P_u`` of the frame less a shift and ``|W - s|^2``. Each chunk of
 rows of a strip is cut to the columns its fitted pixels span, and per frame
 
-1. copied into a buffer of the pass's dtype less the shift (one read of those pixels; a float32
-   frame read into float64 is converted in the same step; the buffer stays in L2);
-2. zeroed outside the fitted pixels by one store through precomputed indices (a disk: the
-   corners of each chunk's box). Unlike a product with a 0/1 mask, this also clears NaN or
-   infinite values outside the aperture;
-3. squared into ``|w - s|^2``: one sum per row (BLAS dot), the rows added in float64 (one float32
-   sum per chunk would round the total to ~1e-7, which the residual identity ``|w|^2 - c.b``
-   turns into ~1e-3 of a small residual RMS);
-4. multiplied by the chunk's rows of the column Legendre table (BLAS gemm: ``W P_u``, D + 1 wide).
+1. copied into a buffer of the pass's dtype less the shift, with zeros outside the fitted pixels,
+   by one compiled walk over the block's runs of fitted pixels
+   (:func:`~wavestack.pipeline.fit.run_fill.fill_runs`; a float32 frame read into float64 is
+   converted in the same step; the buffer stays in L2). Samples outside the runs are never read,
+   so NaN or infinite values there do not matter. The same walk adds ``|w - s|^2`` in float64;
+2. multiplied by the chunk's rows of the column Legendre table (BLAS gemm: ``W P_u``, D + 1 wide).
 
 The row products ``P_v^T (W P_u)`` are then taken in float64, so sums in the pass's dtype run only
 along one row of a chunk (at most a few thousand terms of the centred frame). A non-finite result
 (a NaN or an infinity inside the aperture, or overflow) sends the frame to the masked float64 pass
 of :class:`~wavestack.pipeline.fit.moment_projection.MomentProjection`, which applies the NaN policy.
 
-Precision of the float32 pass (float32 frames only). Summing in float32 leaves each row sum ~1e-7
-of the row's |w - s| off; the map to the coefficients amplifies that as in
+Precision of the float32 pass (float32 frames only). The squares are summed in float64 from the
+float32 block (so the residual identity ``|w|^2 - c.b`` is not limited by them); the products are
+not: summing in float32 leaves each row sum ~1e-7 of the row's |w - s| off; the map to the coefficients amplifies that as in
 :mod:`~wavestack.pipeline.fit.legendre_moments`. Measured against the float64 refit of the same
 float32 samples (centred disk of radius 0.4375 x size, random unit-RMS Zernike wavefronts of 0.02
 per mode plus 1e-3 noise, no offset; norm-wise relative error of the coefficients):
@@ -54,6 +52,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .legendre_moments import Strip
+from .run_fill import fill_runs, fitted_runs
 
 # Norm-wise relative error of the coefficients the float32 pass is allowed, against the float64
 # refit of the same samples: the order of the float32 operator refit's (5e-6 at degree 7).
@@ -68,30 +67,22 @@ FLOAT32_MAX_AMPLIFICATION = 1000.0
 _CHUNK_BYTES = 256 * 1024
 
 
-def _einsum_rows(a: NDArray, b: NDArray, out: NDArray) -> None:
-    np.einsum("ij,ij->i", a, b, out=out)  # pragma: no cover - numpy 1.26 has no vecdot
-
-
-# ``out[i] = a[i] . b[i]`` in the arrays' dtype: BLAS dot per row (numpy >= 2), else einsum.
-_row_dot = getattr(np, "vecdot", _einsum_rows)
-
-
 @dataclass(frozen=True)
 class Chunk:
     """Rows ``[row0, row1)`` and columns ``[col0, col1)`` of a strip, read as one block.
 
     Attributes
     ----------
-    outside : ndarray of intp
-        Flat (row-major) indices in the block of the pixels that are not fitted: set to zero
-        after the copy (one fancy-index store, which also clears NaN or infinite values).
+    runs : ndarray of int64, shape (R, 3)
+        The block's runs of fitted pixels (:func:`~wavestack.pipeline.fit.run_fill.fitted_runs`,
+        in block coordinates): the only samples read.
     """
 
     row0: int
     row1: int
     col0: int
     col1: int
-    outside: NDArray[np.intp]
+    runs: NDArray[np.int64]
 
 
 def plan_chunks(inside: NDArray[np.bool_], strip: Strip, chunk_bytes: int = _CHUNK_BYTES,
@@ -120,7 +111,7 @@ def plan_chunks(inside: NDArray[np.bool_], strip: Strip, chunk_bytes: int = _CHU
             continue
         left, right = int(used[0]), int(used[-1]) + 1
         chunks.append(Chunk(strip.row0 + top, strip.row0 + top + block.shape[0], strip.col0 + left,
-                            strip.col0 + right, np.flatnonzero(~block[:, left:right])))
+                            strip.col0 + right, fitted_runs(block[:, left:right])))
     return chunks
 
 
@@ -165,9 +156,9 @@ class ChunkedPass:
 
     @property
     def nbytes(self) -> int:
-        """Bytes of the zeroing indices and column tables read per frame."""
-        indices = sum(c.outside.nbytes for chunks in self._chunks for c in chunks)
-        return int(indices + sum(t.nbytes for t in self._cols))
+        """Bytes of the runs and column tables read per frame."""
+        runs = sum(c.runs.nbytes for chunks in self._chunks for c in chunks)
+        return int(runs + sum(t.nbytes for t in self._cols))
 
     def moments(self, frame: NDArray, shift: float) -> tuple[NDArray[np.float64], float]:
         """Moments (S, D + 1, D + 1) of ``frame - shift`` on the fitted pixels, and ``|frame - shift|^2``.
@@ -184,15 +175,11 @@ class ChunkedPass:
             work = self._buffers.work = np.empty(self._largest, dtype=self.dtype)
         for k, (strip, rows, cols, chunks) in enumerate(zip(self._strips, self._rows, self._cols, self._chunks)):
             partial = np.zeros((strip.row1 - strip.row0, size), dtype=self.dtype)
-            row_squares = np.zeros(strip.row1 - strip.row0, dtype=self.dtype)
             for chunk in chunks:
                 height, width = chunk.row1 - chunk.row0, chunk.col1 - chunk.col0
                 block = work[: height * width].reshape(height, width)
-                np.subtract(frame[chunk.row0:chunk.row1, chunk.col0:chunk.col1], shift, out=block)
-                work[chunk.outside] = 0.0
-                here = slice(chunk.row0 - strip.row0, chunk.row1 - strip.row0)
-                _row_dot(block, block, out=row_squares[here])
-                np.matmul(block, cols[chunk.col0 - strip.col0:chunk.col1 - strip.col0], out=partial[here])
+                squares += fill_runs(frame, shift, chunk.row0, chunk.col0, chunk.runs, block)
+                np.matmul(block, cols[chunk.col0 - strip.col0:chunk.col1 - strip.col0],
+                          out=partial[chunk.row0 - strip.row0:chunk.row1 - strip.row0])
             moments[k] = rows.T @ partial.astype(np.float64)
-            squares += float(row_squares.sum(dtype=np.float64))
         return moments, squares

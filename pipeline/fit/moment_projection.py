@@ -2,9 +2,10 @@
 
 For each strip of the fitted pixels (:mod:`wavestack.pipeline.fit.legendre_moments`) the frame
 is read once in row chunks that stay in cache (:mod:`wavestack.pipeline.fit.moment_chunks`): each
-chunk is copied less a shift, zeroed outside the fitted pixels, squared into ``|w|^2`` and
-multiplied by the strip's column Legendre table; one more (D + 1)-wide product per strip gives the
-moments, and one (K x S L) product all of ``A^T w``. Nothing of size N x M exists. Float32 frames
+chunk is copied less a shift with zeros outside the fitted pixels and its ``|w|^2`` summed, in one
+compiled walk over the fitted runs, then multiplied by the strip's column Legendre table; one more
+(D + 1)-wide product per strip gives the moments, and one product with a fixed (K + 1) x S (D + 1)^2
+matrix all of ``A^T w`` and ``sum(w)``. Nothing of size N x M exists. Float32 frames
 are summed in float32 products up to degree 7 (the moment_chunks docstring gives the precision),
 everything else in float64. A frame whose sums come out non-finite (a NaN or infinity inside the
 aperture, or overflow) is summed again by the masked float64 pass here, which finds the bad
@@ -73,13 +74,13 @@ class MomentProjection:
         self._index = triangle_index(self._degree)
         self._transform = state.transform
         self._width = self._index.size
+        self._moment_map = _moment_map(state.transform, self._index, len(self._strips), self._degree + 1)
         self.n_columns = int(state.transform.shape[0])
         self._rows = [legendre_table(s.row0, s.row1, self._degree) for s in self._strips]
         self._cols = [legendre_table(s.col0, s.col1, self._degree) for s in self._strips]
         self._outside = [~state.mask[s.row0:s.row1, s.col0:s.col1] for s in self._strips]
         self.n_samples = int(sum(o.size - np.count_nonzero(o) for o in self._outside))
-        self._probe = np.unravel_index(
-            np.array([_first_pixel(state.mask, s) for s in self._strips], dtype=np.intp), self.shape)
+        self._probe = [divmod(_first_pixel(state.mask, s), self.shape[1]) for s in self._strips]
         inside = [~o for o in self._outside]
         self._double = ChunkedPass(self._strips, inside, self._rows, self._cols, np.float64)
         self._single = None  # float32 frames skip the float64 conversion where that stays exact enough
@@ -101,12 +102,10 @@ class MomentProjection:
         return self._transform[:, k * self._width:(k + 1) * self._width]
 
     def _shift(self, frame: NDArray) -> float:
-        values = frame[self._probe].astype(np.float64)  # no copy of a non-contiguous frame
-        total = float(values.sum())
-        if math.isfinite(total):  # the usual case, without np.mean's overhead (~10 us)
-            return total / values.size
-        finite = values[np.isfinite(values)]
-        return float(finite.mean()) if finite.size else 0.0
+        """The mean of each strip's first fitted sample (finite ones; 0 if none is)."""
+        values = [float(frame[row, col]) for row, col in self._probe]  # no numpy call: a few samples
+        finite = [v for v in values if math.isfinite(v)]
+        return math.fsum(finite) / len(finite) if finite else 0.0
 
     def project(self, frame: NDArray, nan_policy: NanPolicy) -> Projected:
         """Moments of one frame (see :class:`~wavestack.pipeline.fit.projection.Projected`)."""
@@ -134,14 +133,16 @@ class MomentProjection:
         rounded = float(chunked.dtype.type(shift))
         with np.errstate(invalid="ignore", over="ignore"):
             moments, squares = chunked.moments(frame, rounded)
-        if np.isfinite(squares) and np.isfinite(moments).all():
-            return self._projected(moments, squares, rounded, None)
+            sums = self._moment_map @ moments.reshape(-1)
+        # A non-finite moment makes its row of sums non-finite (0 x inf is NaN); so may an
+        # overflow of finite ones, which the masked pass then sums again.
+        if math.isfinite(squares) and math.isfinite(float(np.add.reduce(sums))):
+            return Projected(sums[:-1], float(squares), float(sums[-1]), rounded, None)
         return None
 
     def _projected(self, moments: NDArray, squares: float, shift: float, downdate: Downdate | None) -> Projected:
-        vector = moments.reshape(len(self._strips), -1)[:, self._index].reshape(-1)
-        total = float(moments[:, 0, 0].sum())  # P_0 = 1: the (0, 0) moment is the plain sum
-        return Projected(self._transform @ vector, float(squares), total, shift, downdate)
+        sums = self._moment_map @ moments.reshape(-1)
+        return Projected(sums[:-1], float(squares), float(sums[-1]), shift, downdate)
 
     def _moments(self, frame: NDArray, shift: float, outside: list[NDArray[np.bool_]]) -> tuple[NDArray, float]:
         size = self._degree + 1
@@ -198,9 +199,8 @@ class MomentProjection:
                 partial += rows[start - strip.row0:stop - strip.row0].T @ stacked
             per_frame = partial.reshape(size, count, width).transpose(1, 0, 2) @ cols  # (K, D+1, D+1)
             moments[:, k] = per_frame
-        vectors = moments.reshape(count, len(self._strips), -1)[:, :, self._index].reshape(count, -1)
-        products = vectors @ self._transform.T  # (K frames, columns): one product for the stack
-        totals = moments[:, :, 0, 0].sum(axis=1)
+        sums = moments.reshape(count, -1) @ self._moment_map.T  # (K frames, columns + 1): one product
+        products, totals = sums[:, :-1], sums[:, -1]
         results: list[Projected | None] = []
         for i in range(count):
             finite = np.isfinite(squares[i]) and np.isfinite(products[i]).all()
@@ -250,6 +250,20 @@ class MomentProjection:
         residual[~np.isfinite(residual)] = np.nan
         peak_to_valley = float(np.nanmax(residual)) - float(np.nanmin(residual))
         return residual, peak_to_valley
+
+
+def _moment_map(transform: NDArray[np.float64], index: NDArray[np.intp], n_strips: int,
+                size: int) -> NDArray[np.float64]:
+    """The matrix taking the flat moments (S x size x size) to ``A^T (w - s)`` and, in its last
+    row, ``sum(w - s)``: the transform spread over the (row, column) degree pairs it uses, zeros
+    elsewhere, and a 1 at each strip's (0, 0) moment (``P_0 = 1``, so that moment is the plain sum).
+    One product instead of a gather, a product and a sum per frame."""
+    width = index.size
+    spread = np.zeros((transform.shape[0] + 1, n_strips * size * size))
+    for k in range(n_strips):
+        spread[:-1, k * size * size + index] = transform[:, k * width:(k + 1) * width]
+        spread[-1, k * size * size] = 1.0
+    return spread
 
 
 def _first_pixel(mask: NDArray[np.bool_], strip: Strip) -> int:

@@ -71,10 +71,11 @@ class Projected:
 
 def check_frame(frame: NDArray, shape: tuple[int, int]) -> NDArray:
     """The frame as an array of the aperture's shape and a real dtype, or InvalidFrame."""
-    frame = np.asarray(frame)
+    if type(frame) is not np.ndarray:
+        frame = np.asarray(frame)
     if frame.shape != shape:
         raise InvalidFrame(f"frame: expected shape {shape} like the fitter's aperture, got {frame.shape}")
-    if not (np.issubdtype(frame.dtype, np.floating) or np.issubdtype(frame.dtype, np.integer)):
+    if frame.dtype.kind not in "fiu":  # floating, signed or unsigned integer (not bool, not complex)
         raise InvalidFrame(f"frame: expected a real-valued array, got dtype {frame.dtype}")
     return frame
 

@@ -19,6 +19,8 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.aperture.region",  # Aperture.from_mask
     "wavestack.pipeline.fit.build",  # build_fitter
     "wavestack.pipeline.fit.annulus",  # annulus_obscuration
+    "wavestack.pipeline.fit.run_fill",  # fitted_runs, fill_runs
+    "wavestack.pipeline.fit.moment_chunks",  # ChunkedPass
     "wavestack.pipeline.phase.psi.algorithms",  # phase_from_frames
     "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
     "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from wavestack.pipeline import IllConditionedBasis, InvalidFrame, build_fitter, mode_list
 from wavestack.pipeline.fit.legendre_moments import Strip
 from wavestack.pipeline.fit.moment_chunks import FLOAT32_MAX_DEGREE, FLOAT32_TOLERANCE, plan_chunks
+from wavestack.pipeline.fit.run_fill import fill_runs
 
 from moment_pairs import _relative, _terms
 
@@ -118,7 +119,13 @@ def test_float32_overflow_goes_to_the_float64_pass() -> None:
     mask = _mask("disk", 70, rng)
     fitter = build_fitter(mask, modes=10)
     operator = build_fitter(mask, modes=10, dtype=np.float64, refit="operator")
-    frame = (_frame(operator, mask, rng) * 1e20).astype(np.float32)  # squares overflow float32
+    # Samples up to float32's largest (3.4e38): their row sums overflow float32 (the squares,
+    # summed in float64, would not).
+    frame = _frame(operator, mask, rng)
+    frame = (frame * (3e38 / np.nanmax(np.abs(frame)))).astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        moments, _ = fitter._projection._single.moments(frame, float(np.mean(frame[mask], dtype=np.float64)))
+    assert not np.isfinite(moments).all()
     a, b = fitter.fit(frame), operator.fit(frame.astype(np.float64))
     assert np.isfinite(a.residual_rms)
     assert _relative(a.coefficients, b.coefficients) <= 1e-9
@@ -126,22 +133,29 @@ def test_float32_overflow_goes_to_the_float64_pass() -> None:
 
 @fuzz_settings(200)
 @given(rows=st.integers(1, 40), cols=st.integers(1, 40), density=st.floats(0.05, 1.0),
-       chunk_bytes=st.integers(4, 2048), seed=st.integers(0, 2**16))
-def test_chunks_cover_each_fitted_pixel_once_and_zero_the_rest(rows, cols, density, chunk_bytes, seed) -> None:
+       chunk_bytes=st.integers(4, 2048), seed=st.integers(0, 2**16), single=st.booleans())
+def test_chunks_copy_each_fitted_pixel_once_and_zero_the_rest(rows, cols, density, chunk_bytes, seed,
+                                                               single) -> None:
     rng = np.random.default_rng(seed)
     inside = rng.random((rows, cols)) < density
     assume(inside.any())
+    dtype = np.float32 if single else np.float64
+    frame = np.full((rows + 7, cols + 9), np.nan, dtype=dtype)  # NaN, inf off the fitted pixels
+    frame[3:3 + rows, 5:5 + cols] = np.where(inside, rng.normal(size=inside.shape), np.inf)
     strip = Strip(3, 3 + rows, 5, 5 + cols)
-    covered = np.zeros((rows, cols), dtype=int)
-    zeroed = np.zeros((rows, cols), dtype=int)
-    for chunk in plan_chunks(inside, strip, chunk_bytes):
-        block = np.zeros((chunk.row1 - chunk.row0, chunk.col1 - chunk.col0), dtype=int)
-        block.reshape(-1)[chunk.outside] = 1
+    copied = np.zeros((rows, cols))
+    count = np.zeros((rows, cols), dtype=int)
+    squares = 0.0
+    for chunk in plan_chunks(inside, strip, chunk_bytes, np.dtype(dtype).itemsize):
+        block = np.full((chunk.row1 - chunk.row0, chunk.col1 - chunk.col0), 7.0, dtype=dtype)
+        squares += fill_runs(frame, dtype(0.25), chunk.row0, chunk.col0, chunk.runs, block)
         here = (slice(chunk.row0 - 3, chunk.row1 - 3), slice(chunk.col0 - 5, chunk.col1 - 5))
-        covered[here] += 1 - block
-        zeroed[here] += block
-    np.testing.assert_array_equal(covered, inside.astype(int))
-    assert not (zeroed & inside).any() and zeroed.max() <= 1
+        copied[here] += block
+        count[here] += 1
+    expected = np.where(inside, frame[3:3 + rows, 5:5 + cols] - dtype(0.25), 0.0)
+    np.testing.assert_array_equal(copied, expected)
+    assert count[inside].max() == 1
+    assert squares == pytest.approx(float(np.sum(expected.astype(np.float64) ** 2)), rel=1e-12)
 
 
 def test_threads_sharing_a_fitter_do_not_share_its_buffers() -> None:
