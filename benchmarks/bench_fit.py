@@ -117,7 +117,7 @@ def bench_size(size: int) -> None:
         table = legendre_table(int(cols[0]), int(cols[-1]) + 1, degree).astype(np.float32)
         actions = {"floor": lambda: frame.sum(), "sgemm": lambda: box @ table, "moments": lambda: moments.fit(frame)}
         # The projection is private to the fitter; the benchmark reports which pass ran.
-        single = "float32" if moments._projection.float32_pass else "float64"
+        single = moments._projection.float32_frame_pass
 
         build_operator = lstsq = float("nan")
         if design_gb <= ARGS.max_operator_gb:

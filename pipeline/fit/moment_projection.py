@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from .legendre_moments import Strip, amplification, gram_of, legendre_table, strip_moments, triangle_index
 from .moment_chunks import FLOAT32_MAX_AMPLIFICATION, FLOAT32_MAX_DEGREE, ChunkedPass
+from .run_moments import RunPass, run_pass_serves
 from .projection import Downdate, Projected, check_frame, check_frames, refuse_nonfinite
 from .results import NanPolicy
 
@@ -84,14 +85,20 @@ class MomentProjection:
         inside = [~o for o in self._outside]
         self._double = ChunkedPass(self._strips, inside, self._rows, self._cols, np.float64)
         self._single = None  # float32 frames skip the float64 conversion where that stays exact enough
+        self._runs = None  # small frames at low degree: one compiled call per strip, any dtype
         amplified = max(amplification(self._strip_transform(k)) for k in range(len(self._strips)))
-        if self._degree <= FLOAT32_MAX_DEGREE and amplified <= FLOAT32_MAX_AMPLIFICATION:
+        if run_pass_serves(self._degree, self._strips):
+            self._runs = RunPass(self._strips, inside, self._rows, self._cols)
+        elif self._degree <= FLOAT32_MAX_DEGREE and amplified <= FLOAT32_MAX_AMPLIFICATION:
             self._single = ChunkedPass(self._strips, inside, self._rows, self._cols, np.float32)
 
     @property
-    def float32_pass(self) -> bool:
-        """Float32 frames are summed in float32 products (:mod:`~wavestack.pipeline.fit.moment_chunks`)."""
-        return self._single is not None
+    def float32_frame_pass(self) -> str:
+        """The pass a float32 frame takes: ``"runs"`` (:mod:`~wavestack.pipeline.fit.run_moments`),
+        ``"float32"`` or ``"float64"`` (chunked products, :mod:`~wavestack.pipeline.fit.moment_chunks`)."""
+        if self._runs is not None:
+            return "runs"
+        return "float32" if self._single is not None else "float64"
 
     @property
     def nbytes(self) -> int:
@@ -111,8 +118,7 @@ class MomentProjection:
         """Moments of one frame (see :class:`~wavestack.pipeline.fit.projection.Projected`)."""
         frame = check_frame(frame, self.shape)
         shift = self._shift(frame)
-        chunked = self._single if self._single is not None and frame.dtype == np.float32 else self._double
-        projected = self._chunked(chunked, frame, shift)
+        projected = self._first_pass(frame, shift)
         if projected is not None:
             return projected
         with np.errstate(invalid="ignore", over="ignore"):  # non-finite samples are found below
@@ -127,6 +133,16 @@ class MomentProjection:
         logger.debug("omitting %d non-finite samples by downdating the normal equations", count)
         moments, squares = self._moments(frame, shift, [o | b for o, b in zip(self._outside, bad)])
         return self._projected(moments, squares, shift, self._downdate(bad, count))
+
+    def _first_pass(self, frame: NDArray, shift: float) -> Projected | None:
+        """The fast pass for this frame, or None when its sums are not finite (the masked pass decides)."""
+        if self._runs is not None:
+            moments, squares = self._runs.moments(frame, shift)
+            # Finite float64 squares mean every fitted sample is finite and below ~1e154, so the
+            # moments are finite too and nothing below can warn (no error-state switch needed).
+            return self._projected(moments, squares, shift, None) if math.isfinite(squares) else None
+        chunked = self._single if self._single is not None and frame.dtype == np.float32 else self._double
+        return self._chunked(chunked, frame, shift)
 
     def _chunked(self, chunked: ChunkedPass, frame: NDArray, shift: float) -> Projected | None:
         """One chunked pass, or None when its sums are not finite (the masked pass decides)."""
@@ -167,14 +183,15 @@ class MomentProjection:
     def project_many(self, frames: NDArray, keep_samples: bool = False) -> list[Projected | None]:
         """Moments of a stack of frames, one product per chunk of rows for the whole stack.
 
-        Float32 stacks that the float32 pass serves go through it frame by frame (so that
-        ``fit_many`` gives what ``fit`` gives; that pass is as fast per frame). Frames with a non-finite sample inside the aperture come back as None (the caller fits
-        them one by one, with its NaN policy). ``keep_samples`` is accepted for the interface's
+        Frames that the run pass serves, and float32 stacks that the float32 pass serves, go
+        through it frame by frame (so that ``fit_many`` gives what ``fit`` gives; those passes are
+        as fast per frame). Frames with a non-finite sample inside the aperture come back as None
+        (the caller fits them one by one, with its NaN policy). ``keep_samples`` is accepted for the interface's
         sake: a moment residual reads the frame again.
         """
         frames = check_frames(frames, self.shape)
-        if self._single is not None and frames.dtype == np.float32:  # the same pass as fit(), frame by frame
-            return [self._chunked(self._single, frame, self._shift(frame)) for frame in frames]
+        if self._runs is not None or (self._single is not None and frames.dtype == np.float32):
+            return [self._first_pass(frame, self._shift(frame)) for frame in frames]  # as fit() does
         with np.errstate(invalid="ignore", over="ignore"):  # frames with non-finite samples come back None
             return self._project_many(frames)
 

@@ -1,6 +1,14 @@
-"""The chunked passes of the moment refit: float32 frames in float32 products, float64 accumulation."""
+"""The chunked passes of the moment refit: float32 frames in float32 products, float64 accumulation.
+
+Small apertures at degree <= 7 take the run pass (:mod:`~wavestack.pipeline.fit.run_moments`);
+these tests build their fitters with it switched off (:func:`_chunked_only`), so that the chunked
+passes are what they test.
+"""
 
 from __future__ import annotations
+
+from contextlib import contextmanager
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -11,6 +19,7 @@ from hypothesis import strategies as st
 from wavestack.pipeline import IllConditionedBasis, InvalidFrame, build_fitter, mode_list
 from wavestack.pipeline.fit.legendre_moments import Strip
 from wavestack.pipeline.fit.moment_chunks import FLOAT32_MAX_DEGREE, FLOAT32_TOLERANCE, plan_chunks
+from wavestack.pipeline.fit import run_moments
 from wavestack.pipeline.fit.run_fill import fill_runs
 
 from moment_pairs import _relative, _terms
@@ -25,7 +34,19 @@ def _error(a: np.ndarray, b: np.ndarray, scale: float) -> float:
 
 def _uses_float32(fitter) -> bool:
     # The projection is private to the fitter; the tests need to know which pass ran.
-    return fitter._projection.float32_pass
+    return fitter._projection.float32_frame_pass == "float32"
+
+
+@contextmanager
+def _chunked_only():
+    """Fitters built inside take the chunked passes whatever their width (no run pass)."""
+    with mock.patch.object(run_moments, "RUN_PASS_MAX_WIDTH", 0):
+        yield
+
+
+def _build(mask, **settings):
+    with _chunked_only():
+        return build_fitter(mask, **settings)
 
 
 def _assert_within_float32(a, b, frame: np.ndarray, gain: float) -> None:
@@ -65,7 +86,7 @@ def test_float32_frames_match_the_float64_operator_within_the_float32_tolerance(
         operator = build_fitter(mask, refit="operator", dtype=np.float64, **settings)
     except IllConditionedBasis:
         assume(False)
-    fitter = build_fitter(mask, dtype=np.float32, **settings)
+    fitter = _build(mask, dtype=np.float32, **settings)
     assume(fitter.refit == "moments" and _uses_float32(fitter))
     frame = _frame(operator, mask, rng, offset=rng.uniform(-3, 3)).astype(np.float32)
     _assert_within_float32(fitter.fit(frame), operator.fit(frame.astype(np.float64)), frame,
@@ -75,7 +96,7 @@ def test_float32_frames_match_the_float64_operator_within_the_float32_tolerance(
 def test_a_36_mode_disk_uses_the_float32_pass_and_a_degree_8_one_does_not() -> None:
     rng = np.random.default_rng(1)
     mask = _mask("disk", 120, rng)
-    low, high = build_fitter(mask, modes=36), build_fitter(mask, modes=45)  # degree 7, degree 8
+    low, high = _build(mask, modes=36), _build(mask, modes=45)  # degree 7, degree 8
     assert low.refit == high.refit == "moments"
     assert _uses_float32(low) and not _uses_float32(high)
     operator = build_fitter(mask, modes=36, dtype=np.float64, refit="operator")
@@ -86,7 +107,7 @@ def test_a_36_mode_disk_uses_the_float32_pass_and_a_degree_8_one_does_not() -> N
 def test_values_outside_the_aperture_do_not_reach_the_float32_sums() -> None:
     rng = np.random.default_rng(3)
     mask = _mask("annulus", 100, rng)
-    fitter = build_fitter(mask, modes=28, remove="ptt")
+    fitter = _build(mask, modes=28, remove="ptt")
     assert _uses_float32(fitter)
     frame = _frame(fitter, mask, rng).astype(np.float32)
     clean = np.where(mask, frame, np.float32(0.0))
@@ -102,7 +123,7 @@ def test_values_outside_the_aperture_do_not_reach_the_float32_sums() -> None:
 def test_non_finite_samples_inside_go_to_the_float64_pass_and_its_nan_policy() -> None:
     rng = np.random.default_rng(6)
     mask = _mask("disk", 90, rng)
-    fitter = build_fitter(mask, modes=21)
+    fitter = _build(mask, modes=21)
     operator = build_fitter(mask, modes=21, dtype=np.float64, refit="operator")
     frame = _frame(operator, mask, rng).astype(np.float32)
     inside = np.flatnonzero(mask)
@@ -117,7 +138,7 @@ def test_non_finite_samples_inside_go_to_the_float64_pass_and_its_nan_policy() -
 def test_float32_overflow_goes_to_the_float64_pass() -> None:
     rng = np.random.default_rng(8)
     mask = _mask("disk", 70, rng)
-    fitter = build_fitter(mask, modes=10)
+    fitter = _build(mask, modes=10)
     operator = build_fitter(mask, modes=10, dtype=np.float64, refit="operator")
     # Samples up to float32's largest (3.4e38): their row sums overflow float32 (the squares,
     # summed in float64, would not).
@@ -163,7 +184,7 @@ def test_threads_sharing_a_fitter_do_not_share_its_buffers() -> None:
 
     rng = np.random.default_rng(11)
     mask = _mask("disk", 512, rng)  # many chunks: the threads' passes overlap
-    fitter = build_fitter(mask, modes=15)
+    fitter = _build(mask, modes=15)
     frames = [_frame(fitter, mask, rng).astype(np.float32) for _ in range(4)]
     alone = [fitter.fit(frame).coefficients for frame in frames]
     with ThreadPoolExecutor(max_workers=4) as pool:
@@ -176,7 +197,7 @@ def test_threads_sharing_a_fitter_do_not_share_its_buffers() -> None:
 def test_fit_many_of_float32_frames_equals_fit_on_each() -> None:
     rng = np.random.default_rng(12)
     mask = _mask("disk", 64, rng)
-    fitter = build_fitter(mask, modes=21, remove="ptt")
+    fitter = _build(mask, modes=21, remove="ptt")
     assert _uses_float32(fitter)
     frames = np.stack([_frame(fitter, mask, rng, offset=k) for k in range(4)]).astype(np.float32)
     frames[2].reshape(-1)[np.flatnonzero(mask)[:3]] = np.nan  # fitted on its own under the NaN policy
