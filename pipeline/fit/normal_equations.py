@@ -130,7 +130,7 @@ class NormalEquations:
             self._cross = gram[:m, m:]
         # The response to a constant frame: a frame is centred before the product (which keeps
         # float32 sums accurate) and its mean added back through this linear response.
-        self.constant_response = self._solve_centred(column_sums, float(n_samples))
+        self.constant_response = SolvedFrame(*self._solve_centred(column_sums, float(n_samples)))
         self.constant_in_span = self.constant_response.residual_sq <= 1e-9 * n_samples
 
     def solve(self, b: NDArray[np.float64], ww: float, mean: float) -> SolvedFrame:
@@ -149,29 +149,25 @@ class NormalEquations:
         -------
         SolvedFrame
         """
-        centred = self._solve_centred(b, ww)
-        if mean == 0.0:
-            return centred
-        removed = centred.removed
-        if self._has_removal:
-            removed = removed + mean * self.constant_response.removed
-        return SolvedFrame(
-            basis=centred.basis + mean * self.constant_response.basis,
-            removed=removed,
-            residual_sq=centred.residual_sq,
-        )
+        basis, removed, residual_sq = self._solve_centred(b, ww)
+        if mean != 0.0:
+            basis = basis + mean * self.constant_response.basis
+            if self._has_removal:
+                removed = removed + mean * self.constant_response.removed
+        return SolvedFrame(basis=basis, removed=removed, residual_sq=residual_sq)
 
-    def _solve_centred(self, b: NDArray[np.float64], ww: float) -> SolvedFrame:
+    def _solve_centred(self, b: NDArray[np.float64], ww: float
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+        """Basis and removed coefficients of centred samples, and the residual sum of squares."""
         if not self._has_removal:  # the usual case, in as few numpy calls as it takes (~1 us each)
             basis = _cho_solve(self._basis_factor, b)
-            return SolvedFrame(basis=basis, removed=_NO_TERMS, residual_sq=max(ww - float(basis @ b), 0.0))
+            return basis, _NO_TERMS, max(ww - float(basis @ b), 0.0)
         m = self.n_basis
         removed = _cho_solve(self._removal_factor, b[m:])
         b_basis = b[:m] - self._cross @ removed
         ww = ww - float(removed @ b[m:])
         basis = _cho_solve(self._basis_factor, b_basis)
-        residual_sq = max(ww - float(basis @ b_basis), 0.0)
-        return SolvedFrame(basis=basis, removed=removed, residual_sq=residual_sq)
+        return basis, removed, max(ww - float(basis @ b_basis), 0.0)
 
     def without(self, dropped: Downdate) -> NormalEquations:
         """Normal equations with some samples removed, given their share (a rank-k downdate).

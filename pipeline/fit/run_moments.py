@@ -50,9 +50,9 @@ def run_pass_serves(degree: int, strips: list[Strip]) -> bool:
 
 
 @numba.njit(nogil=True, cache=True, fastmath=_FASTMATH)
-def _run_moments(frame, shift, row0, col0, runs, rows_t, cols_t, sums, moments):  # pragma: no cover - compiled
-    """Fill ``moments`` (size x size) of one strip; return its ``|w - s|^2``. ``sums`` is scratch (8, H)."""
-    sums[:, :] = 0.0
+def _run_moments(frame, shift, row0, col0, runs, rows_t, cols_t, moments):  # pragma: no cover - compiled
+    """Fill ``moments`` (size x size) of one strip; return its ``|w - s|^2``."""
+    sums = np.zeros((cols_t.shape[0], rows_t.shape[1]))  # Q[k, r], allocated here: no numpy call per frame
     squares = 0.0
     for i in range(runs.shape[0]):
         r = runs[i, 0]
@@ -153,7 +153,6 @@ class RunPass:
         moments = np.empty((len(self._strips), self._size, self._size))
         squares = 0.0
         for k, strip in enumerate(self._strips):
-            sums = np.empty((RUN_PASS_MAX_DEGREE + 1, strip.row1 - strip.row0))
             squares += _run_moments(frame, float(shift), strip.row0, strip.col0, self._runs[k], self._rows[k],
-                                    self._cols[k], sums, moments[k])
+                                    self._cols[k], moments[k])
         return moments, squares
