@@ -22,7 +22,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from wavestack.drivers.errors import DeviceError, ProtocolError
+from wavestack.drivers.errors import DeviceError, ProtocolError, renewed
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration, acquire_phase_steps
 from wavestack.drivers.mdt693b.phase_stepping import AcquisitionCancelled
@@ -202,10 +202,11 @@ class PhaseStepSource:
             except FrameLost as error:  # one damaged block: this set is lost, the next one goes on
                 self._count_lost(in_hand)
                 lost_in_a_row += 1
-                logger.warning("phase-step set given up (%d in a row): %s", lost_in_a_row, error)
+                # the text, not the error: a log record kept by a handler would keep its frames
+                logger.warning("phase-step set given up (%d in a row): %s", lost_in_a_row, str(error))
                 self._camera.discard_pending()  # a late frame of the lost set must not start the next one
                 if lost_in_a_row >= MAX_LOST_SETS_IN_A_ROW:
-                    self._ring.close(error)
+                    self._ring.close(renewed(error))  # a copy without the traceback, as below
                     return
                 continue
             except AcquisitionCancelled:
@@ -214,8 +215,10 @@ class PhaseStepSource:
             except DeviceError as error:
                 self._count_lost(in_hand)
                 if not self._stop.is_set():
-                    logger.warning("phase-step acquisition stopped: %s", error)
-                    self._ring.close(error)
+                    logger.warning("phase-step acquisition stopped: %s", str(error))  # the text, as above
+                    # a fresh copy: the raised error's traceback holds this frame (self, the source, its
+                    # ring of sets) and the half-read set, a cycle only the cyclic collector would free
+                    self._ring.close(renewed(error))
                 return
             except Exception as error:  # a bug must not leave the pipeline waiting, nor raise in a thread
                 self._count_lost(in_hand)

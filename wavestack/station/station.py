@@ -179,14 +179,17 @@ class Station:
                 break
             if duration_s is not None and time.monotonic() - started >= duration_s:
                 break
+            lost: tuple[StationResult, bool] | None = None  # the invalid result, and whether the camera failed
             try:
                 frames = self._read_set(stop)
-            except DeviceError as error:
-                result = self._device_lost(index, error)
+            except DeviceError as error:  # only its text leaves: its traceback holds the lost source
+                frames, lost = None, (self._device_lost(index, error), error.device == self._devices.camera.name)
+            if lost is not None:  # recovered outside the handler, so the lost source is freed before a new one
+                result, camera_failed = lost
                 on_result(CycleRecord(result))
                 index += 1
                 tally.last_reason = result.reason
-                failures += error.device == self._devices.camera.name  # the camera's own, in a row
+                failures += camera_failed  # the camera's own, in a row
                 self._recover(stop, backoff_s, force_camera=failures > 2)
                 backoff_s = min(backoff_s * 2, self._config.station.reconnect_max_s)
                 outage = True
