@@ -118,12 +118,19 @@ def test_an_endpoint_stall_or_read_timeouts_are_survived(station_factory, check_
     check_fault_run(run, check_counts, 5, watchdog=False)  # one-shot: no window
 
 
-def test_the_lost_source_is_freed_before_its_successor_is_made(station_factory, check_counts, thread_errors,
-                                                               monkeypatch) -> None:
+def _acquisition_threads() -> dict[str, list[threading.Thread]]:
+    roles = ("u3v-reader", "phase-step-acquisition")
+    return {role: [t for t in threading.enumerate() if t.name.startswith(role) and t.is_alive()] for role in roles}
+
+
+def test_a_reconnect_frees_the_lost_source_and_keeps_the_acquisition_threads(station_factory, check_counts,
+                                                                             thread_errors, monkeypatch) -> None:
     """With the cyclic GC off, a retired phase-step source (its ring of sets, the half-read set) is gone by
-    reference counting alone before the station makes the next source (issue 13's soak: the sets of the
-    lost source stayed alive, in a cycle through the error kept in its ring and, until the except block
-    ended, through the raised error's traceback, while the new source filled its own)."""
+    reference counting alone before the station makes the next source, and the camera's reader and the
+    stepping run on the same two threads after the reconnect (issue 13's soak: the sets of the lost source
+    stayed alive, in a cycle through the error kept in its ring and, until the except block ended, through
+    the raised error's traceback, while the new source filled its own; and new threads, new malloc arenas,
+    moved RSS at each reconnect)."""
     made: list[weakref.ref] = []
     alive_when_made: list[int] = []
     original = Station._make_source
@@ -137,11 +144,20 @@ def test_the_lost_source_is_freed_before_its_successor_is_made(station_factory, 
     monkeypatch.setattr(Station, "_make_source", make_source)
     station, devices = station_factory(fault_config())
     camera = devices.bench.camera
+    before: dict[str, list[threading.Thread]] = {}
+
+    def unplug() -> None:
+        before.update(_acquisition_threads())
+        camera.unplug()
+
     gc.disable()  # only reference counting frees: what a cycle holds stays
     try:
-        run = run_fault(station, devices, inject=camera.unplug, clear=camera.replug, hold_s=0.3)
+        run = run_fault(station, devices, inject=unplug, clear=camera.replug, hold_s=0.3)
     finally:
         gc.enable()
     check_fault_run(run, check_counts, 5)
     assert len(made) >= 2, "the station never made a new source after the unplug"
     assert alive_when_made == [0] * len(made), alive_when_made
+    after = _acquisition_threads()
+    assert all(len(threads) == 1 for threads in before.values()), before
+    assert after == before, (before, after)
