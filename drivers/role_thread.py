@@ -5,10 +5,8 @@ arena keeps the heap its thread grew: its top is not given back by ``malloc_trim
 with whatever it holds, to the next new thread that picks it from glibc's free list. A reader or
 stepping thread started afresh at every camera reconnect lands in whichever arena is free, so the
 memory resident after a reconnect depends on the arena it got: issue 13's soak saw RSS move by
-10-40 MB at each camera reconnect, and a probe with the same unplugs, the same code and these two
-roles' threads reused kept the peak RSS per window within 2.7 % and 4.8 % of its mean (two runs)
-where new threads gave 8.5 % and 9.3 % (``docs/faults.md``). A role's jobs run one after the
-other on the same thread, so they stay in the same arena.
+10-40 MB at each camera reconnect (``docs/faults.md``, "Camera reconnects", for the probes). A
+role's jobs run one after the other on the same thread, so they stay in the same arena.
 
 A job submitted while the previous one still runs (a stop that timed out) gets a thread of its
 own, as before, so a stuck job never blocks the next one.
