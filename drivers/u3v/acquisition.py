@@ -22,6 +22,7 @@ import usb.core
 from wavestack.drivers.errors import DeviceDisconnected, ProtocolError
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import FrameRing
+from wavestack.drivers.role_thread import Job, RoleThread
 from wavestack.drivers.u3v import bootstrap as bs
 from wavestack.drivers.u3v.control import ControlChannel
 from wavestack.drivers.u3v.stream import AssembledBlock, BlockAssembler, DiscardedBlock
@@ -142,10 +143,10 @@ def enable_stream(control: ControlChannel, sirm_address: int, deadline: float,
 
 
 class StreamReader:
-    """The reader thread of one acquisition: bulk reads -> blocks -> frames in the ring.
+    """The reader of one acquisition, on the camera's reader thread: bulk reads -> blocks -> frames in the ring.
 
-    The thread runs from :meth:`start` until :meth:`join`, an unplug, or more than 50 stream errors
-    in a row (which close the ring with a ``ProtocolError``).
+    It reads from :meth:`start` until :meth:`join`, an unplug, or more than 50 stream errors in a
+    row (which close the ring with a ``ProtocolError``).
 
     Parameters
     ----------
@@ -164,13 +165,15 @@ class StreamReader:
         ``"stalls_cleared"``, ``"stream_timeouts"``, ``"transfer_errors"``) each time one happens.
     on_disconnect
         Called when the reader finds the camera unplugged.
-    thread_name
-        Name of the reader thread.
+    role
+        The camera's reader thread (:class:`~wavestack.drivers.role_thread.RoleThread`), the same
+        for every acquisition: a new thread per acquisition would get a new malloc arena at each
+        reconnect (see that module).
     """
 
     def __init__(self, dev: usb.core.Device, stream_ep: int, assembler: BlockAssembler, ring: FrameRing[Frame],
                  device: str, count: Callable[[str], None], on_disconnect: Callable[[DeviceDisconnected], None],
-                 thread_name: str) -> None:
+                 role: RoleThread) -> None:
         self._dev = dev
         self._stream_ep = stream_ep
         self._assembler = assembler
@@ -179,16 +182,23 @@ class StreamReader:
         self._count = count
         self._mark_disconnected = on_disconnect
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._read_stream, name=thread_name, daemon=True)
+        self._role = role
+        self._job: Job | None = None
 
     def start(self) -> None:
-        """Start the reader thread."""
-        self._thread.start()
+        """Start reading on the role's thread."""
+        self._job = self._role.run(self._read_stream)
+
+    @property
+    def running(self) -> bool:
+        """True from :meth:`start` until the reader has stopped (joined, unplugged, or given up)."""
+        return self._job is not None and self._job.is_alive()
 
     def join(self) -> None:
-        """Ask the reader thread to stop and wait until it has (within one short stream read)."""
+        """Ask the reader to stop and wait until it has (within one short stream read)."""
         self._stop.set()
-        self._thread.join()
+        if self._job is not None:
+            self._job.join()
 
     def _read_stream(self) -> None:
         """The reader thread: bulk reads -> blocks -> frames in the ring, until stopped or unplugged."""

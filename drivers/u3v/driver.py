@@ -27,6 +27,7 @@ from wavestack.drivers._checks import check_timeout
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, LimitError, ProtocolError
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import FrameRing, RingPolicy
+from wavestack.drivers.role_thread import RoleThread
 from wavestack.drivers.u3v import bootstrap as bs
 from wavestack.drivers.u3v.acquisition import RingHistory, StreamReader, U3VCounters, enable_stream
 from wavestack.drivers.u3v.connection import (CONTROL_PROTOCOL, STREAM_PROTOCOL, U3V_CLASS, U3V_SUBCLASS, Link,
@@ -67,6 +68,7 @@ class U3VCamera:
         self._closed = False
         self._acquiring = False
         self._reader: StreamReader | None = None
+        self._reader_role: RoleThread | None = None  # the reader's one thread for every acquisition
 
     # ----------------------------------------------------------------------------------- opening
     @classmethod
@@ -310,11 +312,17 @@ class U3VCamera:
             raise
         self._acquiring = True
         assembler = BlockAssembler(sizes, sirm.required_payload_size, self._name)
+        self._reader_role = self._reader_role or RoleThread(f"u3v-reader {self._serial or ''}".strip(), daemon=True)
         self._reader = StreamReader(link.dev, link.stream_ep, assembler, self._ring, self._name, self._count,
-                                    self._mark_disconnected, f"u3v-reader {self._serial or ''}".strip())
+                                    self._mark_disconnected, self._reader_role)
         self._reader.start()
         logger.info("%s: streaming, payload %d B in %d x %d B + %d + %d", self._name, sirm.required_payload_size,
                     sizes.payload_count, sizes.payload_size, sizes.final1_size, sizes.final2_size)
+
+    @property
+    def reading(self) -> bool:
+        """True from :meth:`start` until :meth:`stop`, an unplug or too many stream errors (the thread stays)."""
+        return self._reader is not None and self._reader.running
 
     def loss_mark(self) -> int:
         """Frames reported lost so far: take it before a trigger, pass it to :meth:`read_frame`."""
@@ -407,6 +415,8 @@ class U3VCamera:
             logger.warning("%s: stopping while closing: %s", self._name, exc)
         finally:
             self._join_reader()
+            if self._reader_role is not None:  # the reader's thread ends with the camera
+                self._reader_role.close()
             self._closed = True
             self._ring.close(DeviceDisconnected(self._name, "camera closed"))
             self._release()

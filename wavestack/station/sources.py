@@ -22,11 +22,12 @@ import threading
 import time
 from collections.abc import Sequence
 
-from wavestack.drivers.errors import DeviceError, ProtocolError
+from wavestack.drivers.errors import DeviceError, ProtocolError, renewed
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration, acquire_phase_steps
 from wavestack.drivers.mdt693b.phase_stepping import AcquisitionCancelled
 from wavestack.drivers.ring import FrameLost, FrameRing, RingPolicy, WaitTimeout
+from wavestack.drivers.role_thread import Job, RoleThread
 from wavestack.drivers.u3v import U3VCamera
 from wavestack.station.counters import Counters, FrameCounts, SetCounts
 
@@ -146,6 +147,10 @@ class PhaseStepSource:
         ``timeout_s``); the station passes its ``frame_timeout_s``.
     ring_capacity : int
         Sets held for the pipeline (newest-only).
+    role : RoleThread, optional
+        The thread the stepping runs on; the station passes its own, the same for every source, so
+        a reconnect starts no new thread (:mod:`~wavestack.drivers.role_thread`: a new thread gets a
+        new malloc arena). Default: a thread of this source's own.
 
     Notes
     -----
@@ -158,7 +163,7 @@ class PhaseStepSource:
 
     def __init__(self, camera: U3VCamera, piezo: MDT693B, *, axis: str, steps_rad: Sequence[float],
                  calibration: PhaseStepCalibration, settle_s: float, timeout_s: float, ring_capacity: int,
-                 frame_timeout_s: float | None = None) -> None:
+                 frame_timeout_s: float | None = None, role: RoleThread | None = None) -> None:
         self._camera = camera
         self._piezo = piezo
         self._axis = axis
@@ -170,7 +175,8 @@ class PhaseStepSource:
         self._capacity = ring_capacity
         self._ring: FrameRing[tuple[Frame, ...]] = FrameRing(ring_capacity, RingPolicy.NEWEST_ONLY, name="phase sets")
         self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._role = role
+        self._thread: threading.Thread | Job | None = None
         self._sets = 0
         self._count_lock = threading.Lock()
         self._lost_frames = 0  # read for a set that a device error left unfinished
@@ -187,8 +193,11 @@ class PhaseStepSource:
         self._frames = _CameraFrames(self._camera)
         self._camera.start()
         self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name="phase-step-acquisition")
-        self._thread.start()
+        if self._role is not None:
+            self._thread = self._role.run(self._run)
+        else:
+            self._thread = threading.Thread(target=self._run, name="phase-step-acquisition")
+            self._thread.start()
 
     def _run(self) -> None:
         """The stepping thread: sets into the ring until stopped or a device fails; never raises."""
@@ -202,10 +211,11 @@ class PhaseStepSource:
             except FrameLost as error:  # one damaged block: this set is lost, the next one goes on
                 self._count_lost(in_hand)
                 lost_in_a_row += 1
-                logger.warning("phase-step set given up (%d in a row): %s", lost_in_a_row, error)
+                # the text, not the error: a log record kept by a handler would keep its frames
+                logger.warning("phase-step set given up (%d in a row): %s", lost_in_a_row, str(error))
                 self._camera.discard_pending()  # a late frame of the lost set must not start the next one
                 if lost_in_a_row >= MAX_LOST_SETS_IN_A_ROW:
-                    self._ring.close(error)
+                    self._ring.close(renewed(error))  # a copy without the traceback, as below
                     return
                 continue
             except AcquisitionCancelled:
@@ -214,8 +224,10 @@ class PhaseStepSource:
             except DeviceError as error:
                 self._count_lost(in_hand)
                 if not self._stop.is_set():
-                    logger.warning("phase-step acquisition stopped: %s", error)
-                    self._ring.close(error)
+                    logger.warning("phase-step acquisition stopped: %s", str(error))  # the text, as above
+                    # a fresh copy: the raised error's traceback holds this frame (self, the source, its
+                    # ring of sets) and the half-read set, a cycle only the cyclic collector would free
+                    self._ring.close(renewed(error))
                 return
             except Exception as error:  # a bug must not leave the pipeline waiting, nor raise in a thread
                 self._count_lost(in_hand)

@@ -8,8 +8,9 @@ frozen outcome; :func:`~wavestack.station.cycle.make_result` makes the
 :class:`~wavestack.station.results.StationResult`; the output stage sends it through the safety
 stage to the PLC (with a heartbeat each cycle, so a stalled pipeline is a dead host to the PLC's
 watchdog) and returns what it sent; every sink gets one
-:class:`~wavestack.station.cycle.CycleRecord`. Acquisition runs in the source's own threads;
-fitter builds on the fitter cache's worker. On a simulated camera the devices bring a
+:class:`~wavestack.station.cycle.CycleRecord`. Acquisition runs on the camera's reader thread and
+the station's stepping thread, each one thread for the whole run, across reconnects
+(:mod:`~wavestack.drivers.role_thread`); fitter builds on the fitter cache's worker. On a simulated camera the devices bring a
 :class:`~wavestack.station.truth.TruthCheck`; the loop knows no simulator type.
 
 A device lost while running does not end the run: the result says so (invalid, never forwarded),
@@ -40,6 +41,7 @@ from wavestack.config import StationConfig
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, renewed
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import WaitTimeout
+from wavestack.drivers.role_thread import RoleThread
 from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
 from wavestack.station.devices import StationDevices, phase_steps_rad, reconnect_devices
@@ -122,6 +124,8 @@ class Station:
         self._config = config
         self._devices = devices
         self.processor = build_processor(config)
+        # one stepping thread for every source: a new one per reconnect would get a new malloc arena
+        self._stepping = RoleThread("phase-step-acquisition") if config.phase_stepping else None
         self._source: CarrierSource | PhaseStepSource | None = self._make_source()
         self._retired = Counters.zero(self._source.frames_per_set)  # sources of lost connections
         self._last_counters = self._retired  # the last snapshot that added up
@@ -147,12 +151,14 @@ class Station:
                                steps_rad=phase_steps_rad(config), calibration=devices.calibration,
                                settle_s=config.pzt.settle_s, timeout_s=config.camera.timeout_s,
                                ring_capacity=config.station.set_ring_capacity,
-                               frame_timeout_s=config.station.frame_timeout_s)
+                               frame_timeout_s=config.station.frame_timeout_s, role=self._stepping)
 
     def close(self) -> None:
         """Stop acquisition and the fitter worker; idempotent."""
         if self._source is not None:
             self._source.stop()
+        if self._stepping is not None:  # the source's stop waited for the stepping already
+            self._stepping.close(timeout_s=self._config.camera.timeout_s * 2 + 5.0)
         self.processor.close()
 
     # ------------------------------------------------------------------ the loop
@@ -179,14 +185,17 @@ class Station:
                 break
             if duration_s is not None and time.monotonic() - started >= duration_s:
                 break
+            lost: tuple[StationResult, bool] | None = None  # the invalid result, and whether the camera failed
             try:
                 frames = self._read_set(stop)
-            except DeviceError as error:
-                result = self._device_lost(index, error)
+            except DeviceError as error:  # only its text leaves: its traceback holds the lost source
+                frames, lost = None, (self._device_lost(index, error), error.device == self._devices.camera.name)
+            if lost is not None:  # recovered outside the handler, so the lost source is freed before a new one
+                result, camera_failed = lost
                 on_result(CycleRecord(result))
                 index += 1
                 tally.last_reason = result.reason
-                failures += error.device == self._devices.camera.name  # the camera's own, in a row
+                failures += camera_failed  # the camera's own, in a row
                 self._recover(stop, backoff_s, force_camera=failures > 2)
                 backoff_s = min(backoff_s * 2, self._config.station.reconnect_max_s)
                 outage = True

@@ -326,6 +326,13 @@ def wait_for_no_reader() -> list[threading.Thread]:
     return reader_threads()
 
 
+def wait_until_not_reading(camera: U3VCamera) -> bool:
+    deadline = time.monotonic() + TIMEOUT_S
+    while camera.reading and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return not camera.reading
+
+
 def test_unplug_mid_stream() -> None:
     device = sim()
     with opened(device) as camera:
@@ -337,7 +344,7 @@ def test_unplug_mid_stream() -> None:
             camera.read_frame(0.1)
         # the ring was closed once, with one error (raised as a new object each time: drivers.errors.renewed)
         assert (type(again.value), str(again.value)) == (type(error), str(error)) and again.value is not error
-        assert wait_for_no_reader() == []  # the reader thread ended by itself
+        assert wait_until_not_reading(camera)  # the reader ended by itself (its thread waits for the next start)
         with pytest.raises(DeviceDisconnected):
             camera.set_exposure_us(500.0, timeout_s=TIMEOUT_S)
         with pytest.raises(DeviceDisconnected):
@@ -355,8 +362,11 @@ def test_replug_and_reopen_streams_again() -> None:
         with pytest.raises(DeviceDisconnected):
             camera.reopen(timeout_s=0.2)  # still unplugged
         device.replug()
+        readers = reader_threads()
         camera.reopen(timeout_s=TIMEOUT_S)  # acquisition was running: it resumes
         frames = [camera.read_frame(TIMEOUT_S) for _ in range(3)]
+        # on the same reader thread: a new thread per acquisition gets a new malloc arena (drivers.role_thread)
+        assert len(readers) == 1 and reader_threads() == readers
         camera.stop()
     for frame in frames:
         assert_matches_truth(frame, device, "Mono12")
