@@ -205,21 +205,10 @@ class U3VCamera:
         return float(self._read_feature("ExposureTime", self._deadline(None)))
 
     def set_exposure_us(self, exposure_us: float, timeout_s: float) -> None:
-        """Set the exposure time.
+        """Set the exposure time ``exposure_us``, µs, waiting at most ``timeout_s`` s for the acknowledge.
 
-        Parameters
-        ----------
-        exposure_us
-            Exposure, µs; finite and > 0.
-        timeout_s
-            Longest wait for the acknowledge, s.
-
-        Raises
-        ------
-        ValueError
-            Not finite or <= 0 (nothing sent).
-        LimitError
-            Outside the XML's Min/Max (nothing sent).
+        Raises ``ValueError`` when it is not finite or <= 0 and ``LimitError`` outside the XML's
+        Min/Max (nothing sent in either case).
         """
         if not (math.isfinite(exposure_us) and exposure_us > 0):
             raise ValueError(f"exposure_us must be finite and > 0, got {exposure_us}")
