@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from typing import TYPE_CHECKING, Union
 
 import numpy as np
@@ -359,7 +360,7 @@ class Fitter:
             residual_map, residual_pv = self._projection.residual(frame, projected, terms)
         return FitResult(
             coefficients=self._coefficient_transform @ solved.basis,
-            residual_rms=float(np.sqrt(solved.residual_sq / n_valid)),
+            residual_rms=math.sqrt(solved.residual_sq / n_valid),
             valid_count=n_valid,
             nan_count=0 if projected.downdate is None else projected.downdate.count,
             basis=self.basis,
