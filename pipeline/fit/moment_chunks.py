@@ -13,8 +13,9 @@ rows of a strip is cut to the columns its fitted pixels span, and per frame
 
 The row products ``P_v^T (W P_u)`` are then taken in float64, so sums in the pass's dtype run only
 along one row of a chunk (at most a few thousand terms of the centred frame). A non-finite result
-(a NaN or an infinity inside the aperture, or overflow) sends the frame to the masked float64 pass
-of :class:`~wavestack.pipeline.fit.moment_projection.MomentProjection`, which applies the NaN policy.
+(a NaN or an infinity inside the aperture, or overflow) sends the frame back to
+:class:`~wavestack.pipeline.fit.moment_projection.MomentProjection`, which applies the NaN policy
+and sums the finite fitted samples in a float64 pass of their own.
 
 Precision of the float32 pass (float32 frames only). The squares are summed in float64 from the
 float32 block (so the residual identity ``|w|^2 - c.b`` is not limited by them); the products are

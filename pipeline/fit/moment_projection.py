@@ -5,11 +5,12 @@ is read once in row chunks that stay in cache (:mod:`wavestack.pipeline.fit.mome
 chunk is copied less a shift with zeros outside the fitted pixels and its ``|w|^2`` summed, in one
 compiled walk over the fitted runs, then multiplied by the strip's column Legendre table; one more
 (D + 1)-wide product per strip gives the moments, and one product with a fixed (K + 1) x S (D + 1)^2
-matrix all of ``A^T w`` and ``sum(w)``. Nothing of size N x M exists. Float32 frames
-are summed in float32 products up to degree 7 (the moment_chunks docstring gives the precision),
-everything else in float64. A frame whose sums come out non-finite (a NaN or infinity inside the
-aperture, or overflow) is summed again by the masked float64 pass here, which finds the bad
-samples and applies the NaN policy.
+matrix all of ``A^T w`` and ``sum(w)``. Nothing of size N x M exists. Small apertures up to
+degree 7 take the run pass (:mod:`~wavestack.pipeline.fit.run_moments`, float64 sums); wider
+float32 frames are summed in float32 products up to degree 7 (the moment_chunks docstring gives
+the precision), everything else in float64. A frame whose sums come out non-finite (a NaN or
+infinity inside the aperture, or overflow) has its bad samples found here, the NaN policy
+applied, and is summed again by the float64 chunked pass over the finite fitted samples.
 """
 
 from __future__ import annotations
@@ -29,8 +30,6 @@ from .results import NanPolicy
 
 logger = logging.getLogger(__name__)
 
-# Float64 bytes of one chunk of a strip: small enough to stay in a 2 MB L2 cache with its source.
-_CHUNK_BYTES = 1024 * 1024
 # Float64 bytes of the stacked chunk of a batched refit.
 _BATCH_BYTES = 8 * 1024 * 1024
 # Dropped samples above which their share of the Gram matrix comes from mask moments, not rows.
@@ -121,21 +120,20 @@ class MomentProjection:
         projected = self._first_pass(frame, shift)
         if projected is not None:
             return projected
-        with np.errstate(invalid="ignore", over="ignore"):  # non-finite samples are found below
-            moments, squares = self._moments(frame, shift, self._outside)
-        if np.isfinite(squares) and np.isfinite(moments).all():
-            return self._projected(moments, squares, shift, None)
+        # Its sums are not finite: non-finite samples inside the aperture, or finite ones whose
+        # float32 products (or float64 squares) overflow.
         bad = [~o & ~np.isfinite(frame[s.row0:s.row1, s.col0:s.col1]) for s, o in zip(self._strips, self._outside)]
         count = int(sum(np.count_nonzero(b) for b in bad))
-        if count == 0:  # finite samples whose squares overflow: nothing to leave out
-            return self._projected(moments, squares, shift, None)
+        if count == 0:  # nothing to leave out: the float64 pass, whatever it sums to
+            return self._summed(self._double, frame, shift, None)
         refuse_nonfinite(count, self.n_samples, self.n_columns, nan_policy)
         logger.debug("omitting %d non-finite samples by downdating the normal equations", count)
-        moments, squares = self._moments(frame, shift, [o | b for o, b in zip(self._outside, bad)])
-        return self._projected(moments, squares, shift, self._downdate(bad, count))
+        finite = ChunkedPass(self._strips, [~(o | b) for o, b in zip(self._outside, bad)], self._rows, self._cols,
+                             np.float64)
+        return self._summed(finite, frame, shift, self._downdate(bad, count))
 
     def _first_pass(self, frame: NDArray, shift: float) -> Projected | None:
-        """The fast pass for this frame, or None when its sums are not finite (the masked pass decides)."""
+        """The fast pass for this frame, or None when its sums are not finite (:meth:`project` decides)."""
         if self._runs is not None:
             moments, squares = self._runs.moments(frame, shift)
             # Finite float64 squares mean every fitted sample is finite and below ~1e154, so the
@@ -145,13 +143,13 @@ class MomentProjection:
         return self._chunked(chunked, frame, shift)
 
     def _chunked(self, chunked: ChunkedPass, frame: NDArray, shift: float) -> Projected | None:
-        """One chunked pass, or None when its sums are not finite (the masked pass decides)."""
+        """One chunked pass, or None when its sums are not finite (:meth:`project` decides)."""
         rounded = float(chunked.dtype.type(shift))
         with np.errstate(invalid="ignore", over="ignore"):
             moments, squares = chunked.moments(frame, rounded)
             sums = self._moment_map @ moments.reshape(-1)
         # A non-finite moment makes its row of sums non-finite (0 x inf is NaN); so may an
-        # overflow of finite ones, which the masked pass then sums again.
+        # overflow of finite ones, which the float64 pass then sums again.
         if math.isfinite(squares) and math.isfinite(float(np.add.reduce(sums))):
             return Projected(sums[:-1], float(squares), float(sums[-1]), rounded, None)
         return None
@@ -160,25 +158,11 @@ class MomentProjection:
         sums = self._moment_map @ moments.reshape(-1)
         return Projected(sums[:-1], float(squares), float(sums[-1]), shift, downdate)
 
-    def _moments(self, frame: NDArray, shift: float, outside: list[NDArray[np.bool_]]) -> tuple[NDArray, float]:
-        size = self._degree + 1
-        moments = np.empty((len(self._strips), size, size))
-        squares = 0.0
-        widest = max(s.col1 - s.col0 for s in self._strips)
-        chunk = max(1, _CHUNK_BYTES // (8 * widest))
-        work = np.empty(chunk * widest)
-        for k, (strip, rows, cols, out) in enumerate(zip(self._strips, self._rows, self._cols, outside)):
-            partial = np.zeros((size, strip.col1 - strip.col0))
-            for start in range(strip.row0, strip.row1, chunk):
-                stop = min(start + chunk, strip.row1)
-                buffer = work[: (stop - start) * (strip.col1 - strip.col0)].reshape(stop - start, -1)
-                np.subtract(frame[start:stop, strip.col0:strip.col1], shift, out=buffer, dtype=np.float64)
-                np.copyto(buffer, 0.0, where=out[start - strip.row0:stop - strip.row0])
-                flat = buffer.reshape(-1)
-                squares += float(np.dot(flat, flat))
-                partial += rows[start - strip.row0:stop - strip.row0].T @ buffer
-            moments[k] = partial @ cols
-        return moments, squares
+    def _summed(self, chunked: ChunkedPass, frame: NDArray, shift: float, downdate: Downdate | None) -> Projected:
+        """A float64 chunked pass, its sums kept even when they are not finite."""
+        with np.errstate(invalid="ignore", over="ignore"):
+            moments, squares = chunked.moments(frame, shift)
+            return self._projected(moments, squares, shift, downdate)
 
     def project_many(self, frames: NDArray, keep_samples: bool = False) -> list[Projected | None]:
         """Moments of a stack of frames, one product per chunk of rows for the whole stack.
