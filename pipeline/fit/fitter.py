@@ -32,8 +32,9 @@ from .moment_projection import MomentProjection
 from .normal_equations import NormalEquations, SolvedFrame
 from .operator_projection import OperatorProjection
 from .physical_terms import terms_from_vector
-from .projection import Projected
+from .projection import Projected, check_frames
 from .results import FitBasis, FitResult, FitterDiagnostics, NanPolicy
+from .run_refit import RunRefit
 
 if TYPE_CHECKING:  # only for annotations: the fitter does not need the map's modules
     from ..mapping import CanonicalMap
@@ -106,6 +107,10 @@ class Fitter:
         self._from_coefficients = from_coefficients
         self._circle_transform = circle_transform
         self._removal_transform = removal_transform
+        self._run_refit = None  # small frames of polynomial bases: the whole refit in one compiled call
+        if isinstance(projection, MomentProjection):
+            maps = [m for m in (coefficient_transform, circle_transform) if m is not None]
+            self._run_refit = RunRefit.serving(projection, equations, np.stack(maps))
 
     @property
     def dtype(self) -> np.dtype:
@@ -184,6 +189,10 @@ class Fitter:
         """
         if nan_policy not in ("raise", "omit"):
             raise ValueError(f"nan_policy: expected 'raise' or 'omit', got {nan_policy!r}")
+        if self._run_refit is not None and not residual:
+            fitted = self._run_refit.fit(frame)
+            if fitted is not None:  # else a sample is not finite: the general path applies the policy
+                return self._run_result(*fitted)
         projected = self._projection.project(frame, nan_policy)
         return self._finish(frame, projected, residual)
 
@@ -227,6 +236,8 @@ class Fitter:
         """
         if nan_policy not in ("raise", "omit"):
             raise ValueError(f"nan_policy: expected 'raise' or 'omit', got {nan_policy!r}")
+        if self._run_refit is not None and not residual:  # frame by frame, as fit() does
+            return [self.fit(frame, nan_policy=nan_policy) for frame in check_frames(frames, self._projection.shape)]
         projected = self._projection.project_many(frames, keep_samples=residual)
         frames = np.asarray(frames)
         return [self.fit(frames[i], nan_policy=nan_policy, residual=residual) if p is None
@@ -333,6 +344,13 @@ class Fitter:
         return state
 
     # -- per-frame helpers ------------------------------------------------------------------
+
+    def _run_result(self, mapped: NDArray[np.float64], residual_sq: float) -> FitResult:
+        """The result of the one-call refit: ``mapped`` holds the coefficients (and circle ones)."""
+        n_valid = self._equations.n_samples
+        return FitResult(coefficients=mapped[0], residual_rms=math.sqrt(residual_sq / n_valid), valid_count=n_valid,
+                         nan_count=0, basis=self.basis,
+                         circle_coefficients=mapped[1] if self._circle_transform is not None else None)
 
     def _result(
         self,

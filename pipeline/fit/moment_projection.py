@@ -84,7 +84,7 @@ class MomentProjection:
         inside = [~o for o in self._outside]
         self._double = ChunkedPass(self._strips, inside, self._rows, self._cols, np.float64)
         self._single = None  # float32 frames skip the float64 conversion where that stays exact enough
-        self._runs = None  # small frames at low degree: one compiled call per strip, any dtype
+        self._runs = None  # small frames at low degree: one compiled call, any dtype
         amplified = max(amplification(self._strip_transform(k)) for k in range(len(self._strips)))
         if run_pass_serves(self._degree, self._strips):
             self._runs = RunPass(self._strips, inside, self._rows, self._cols)
@@ -98,6 +98,23 @@ class MomentProjection:
         if self._runs is not None:
             return "runs"
         return "float32" if self._single is not None else "float64"
+
+    @property
+    def run_pass(self) -> RunPass | None:
+        """The compiled pass over the runs of fitted pixels, when it serves this basis (else None)."""
+        return self._runs
+
+    @property
+    def probe(self) -> NDArray[np.int64]:
+        """(row, column) of each strip's first fitted pixel, shape (S, 2): the shift's samples."""
+        return np.array(self._probe, dtype=np.int64).reshape(-1, 2)
+
+    @property
+    def moment_map(self) -> NDArray[np.float64]:
+        """The map (n_columns + 1, S (D + 1)^2) from the moments to ``A^T (w - s)`` and ``sum(w - s)``."""
+        view = self._moment_map.view()
+        view.flags.writeable = False
+        return view
 
     @property
     def nbytes(self) -> int:

@@ -140,6 +140,18 @@ class NormalEquations:
         self.constant_response = SolvedFrame(*self._solve_centred(column_sums, float(n_samples)))
         self.constant_in_span = self.constant_response.residual_sq <= 1e-9 * n_samples
 
+    @property
+    def has_removal(self) -> bool:
+        """Whether physical-term columns are removed before the fit (k > 0)."""
+        return self._has_removal
+
+    @property
+    def basis_inverse(self) -> NDArray[np.float64]:
+        """``G^{-1}`` (M x M) of the basis columns, read-only."""
+        view = self._basis_inverse.view()
+        view.flags.writeable = False
+        return view
+
     def solve(self, b: NDArray[np.float64], ww: float, mean: float) -> SolvedFrame:
         """Solve for a frame given ``b = A^T (w - mean)`` and ``ww = |w - mean|^2``.
 

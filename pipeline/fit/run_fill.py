@@ -22,8 +22,9 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-# Reassociation and contraction only: the sums may be reordered and fused, NaN stays NaN.
-_FASTMATH = {"reassoc", "contract"}
+# The compiled loops of the fit (here, run_moments, run_refit) allow reassociation and contraction
+# only: the sums may be reordered and fused, NaN stays NaN.
+FASTMATH = {"reassoc", "contract"}
 
 
 def fitted_runs(inside: NDArray[np.bool_]) -> NDArray[np.int64]:
@@ -53,7 +54,7 @@ def fitted_runs(inside: NDArray[np.bool_]) -> NDArray[np.int64]:
     return np.column_stack((rows, starts, stops)).astype(np.int64)
 
 
-@numba.njit(nogil=True, cache=True, fastmath=_FASTMATH)
+@numba.njit(nogil=True, cache=True, fastmath=FASTMATH)
 def fill_runs(frame, shift, row0, col0, runs, block):  # pragma: no cover - compiled; tested through its callers
     """``block <- frame - shift`` on the runs, 0 elsewhere; returns ``|block|^2`` in float64.
 

@@ -21,6 +21,8 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.fit.annulus",  # annulus_obscuration
     "wavestack.pipeline.fit.run_fill",  # fitted_runs, fill_runs
     "wavestack.pipeline.fit.moment_chunks",  # ChunkedPass
+    "wavestack.pipeline.fit.run_moments",  # RunPass
+    "wavestack.pipeline.fit.run_refit",  # RunRefit
     "wavestack.pipeline.phase.psi.algorithms",  # phase_from_frames
     "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
     "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice
