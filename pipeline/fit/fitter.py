@@ -15,6 +15,8 @@ aperture; :class:`Fitter` then refits any frame on that aperture:
 
 The residual RMS comes from the normal-equation identity, so steps 1-3 are the whole per-frame
 cost. The residual map and its peak-to-valley take one more pass and are computed on request.
+Where the moments come from the run pass (small apertures, degree <= 7) and no physical terms
+are removed, steps 1-3 are one compiled call (:mod:`wavestack.pipeline.fit.run_refit`).
 """
 
 from __future__ import annotations
