@@ -320,7 +320,8 @@ class TestOptic:
 
         Example
         -------
-        >>> optic = TestOptic(OpticSettings(zernike_waves=(0.0, 0.0, 0.0, 0.2)), 64, 64)
+        >>> disk = ApertureShape(centre_px=(32.0, 32.0), radius_px=28.0)
+        >>> optic = TestOptic(OpticSettings(zernike_waves=(0.0, 0.0, 0.0, 0.2), aperture=disk), 64, 64)
         >>> np.array_equal(optic.wavefront(1.0, 2), optic.truth(1.0).wavefront_waves[::2, ::2], equal_nan=True)
         True
         """
@@ -351,20 +352,15 @@ class TestOptic:
                                   facts.carrier_cycles)
 
     def frame(self, time_s: float, phase_shift_rad: float = 0.0) -> tuple[NDArray, FrameFacts]:
-        """Render one interferogram as :meth:`interferogram` does, without the truth's wavefront map.
+        """:meth:`interferogram`'s frame (the same for the same call sequence) without the truth's map.
 
-        For a camera that renders 30 frames/s and keeps only what the map can be re-made from
-        (:class:`FrameFacts`): the map is two full-frame float64 arrays per frame, made and thrown away.
-
-        Returns
-        -------
-        frame : ndarray of uint8 (8 bits) or uint16, shape (height, width)
-            The same frame :meth:`interferogram` renders for the same call sequence.
-        facts : FrameFacts
+        For a camera rendering 30 frames/s that keeps only what the map is re-made from: the map is
+        a full-frame float64 array per frame. Returns the frame and its :class:`FrameFacts`.
 
         Example
         -------
-        >>> optic = TestOptic(OpticSettings(zernike_waves=(0.0, 0.0, 0.0, 0.2)), 64, 64)
+        >>> disk = ApertureShape(centre_px=(32.0, 32.0), radius_px=28.0)
+        >>> optic = TestOptic(OpticSettings(zernike_waves=(0.0, 0.0, 0.0, 0.2), aperture=disk), 64, 64)
         >>> pixels, facts = optic.frame(0.5, np.pi / 2)
         >>> pixels.shape, facts.phase_shift_rad == np.pi / 2, facts.aperture_revision
         ((64, 64), True, 0)
