@@ -11,8 +11,10 @@ device's frame ids (the camera overwrote frames the host never read) counts as a
 Two policies:
 
 ``NEWEST_ONLY`` (closed loops)
-    The consumer always gets the newest frame; older pending frames are dropped when it reads, and a
-    full ring drops its oldest frame to make room. A slow consumer sees fresh data, never a backlog.
+    The consumer always gets the newest frame; a new frame supersedes the pending one, which is
+    dropped at once (it could never be delivered), so at most one frame is held whatever the
+    capacity. A slow consumer sees fresh data, never a backlog, and a stalled one holds one frame,
+    not ``capacity`` (issue 13's soak: a station stalled by a PLC fault held two 10 MB phase sets).
 ``OLDEST_FIRST`` (recording)
     First in, first out; a full ring drops the *incoming* frame, so what is kept is contiguous from
     the oldest pending frame.
@@ -88,7 +90,8 @@ class FrameRing(Generic[T]):
     Parameters
     ----------
     capacity
-        Most frames held at once (>= 1); memory stays bounded by ``capacity`` frames.
+        Most frames held at once (>= 1); memory stays bounded by ``capacity`` frames (one frame
+        with ``NEWEST_ONLY``).
     policy
         :class:`RingPolicy`.
     name
@@ -145,11 +148,14 @@ class FrameRing(Generic[T]):
                                 self._name, self._last_frame_id, frame_id)
                 self._last_frame_id = frame_id
             self._acquired += 1
-            if len(self._items) >= self._capacity:
+            if self._policy is RingPolicy.NEWEST_ONLY:
+                # a pending frame superseded now can never be delivered: dropped at once, not held
+                # until the next read (a stalled consumer would keep ``capacity`` frames for nothing)
+                self._dropped += len(self._items)
+                self._items.clear()
+            elif len(self._items) >= self._capacity:
                 self._dropped += 1
-                if self._policy is RingPolicy.OLDEST_FIRST:
-                    return  # keep what is pending contiguous; the incoming frame is the one given up
-                self._items.popleft()
+                return  # keep what is pending contiguous; the incoming frame is the one given up
             self._items.append(item)
             self._condition.notify()
 

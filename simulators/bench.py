@@ -110,9 +110,9 @@ class SimulatedInterferometer:
         volts = None if self.piezo is None else self.piezo.voltage(self.coupling.axis)
         shift = 0.0 if volts is None else volts * self.coupling.radians_per_volt
         time_s = device_time_ns * 1e-9
-        pixels, truth = self.optic.interferogram(time_s, shift)
-        return pixels, FrameTruth(time_s, volts, shift, truth.aperture_revision, self.optic,
-                                  truth.carrier_cycles, truth.vibration_rad, truth.surface_revision)
+        pixels, facts = self.optic.frame(time_s, shift)  # the truth's map is re-made on request, not per frame
+        return pixels, FrameTruth(time_s, volts, shift, facts.aperture_revision, self.optic,
+                                  facts.carrier_cycles, facts.vibration_rad, facts.surface_revision)
 
 
 class SimulatedShackHartmann:

@@ -87,11 +87,11 @@ from wavestack.simulators._checks import check_image_size, finite_number, read_o
 from wavestack.simulators.aperture_shape import ApertureKind, ApertureShape
 from wavestack.simulators.optic_settings import BitDepth, OpticSettings
 from wavestack.simulators.optic_surface import SurfacePhase, SurfaceView
-from wavestack.simulators.optic_truth import OpticTruth
+from wavestack.simulators.optic_truth import FrameFacts, OpticTruth
 from wavestack.simulators.surface import SurfaceState
 from wavestack.simulators.surface_sources import initial_heights_nm
 
-__all__ = ["ApertureKind", "ApertureShape", "BitDepth", "OpticSettings", "OpticTruth", "TestOptic"]
+__all__ = ["ApertureKind", "ApertureShape", "BitDepth", "FrameFacts", "OpticSettings", "OpticTruth", "TestOptic"]
 
 logger = logging.getLogger(__name__)
 
@@ -301,6 +301,36 @@ class TestOptic:
         rendering = self._rendering
         return self._truth(rendering, self._surface_view(rendering), t, 0.0, 0.0, (0.0, 0.0))
 
+    def wavefront(self, time_s: float, step: int = 1) -> NDArray[np.float64]:
+        """The optic's wavefront ``W(t)`` on every ``step``-th row and column, waves (NaN outside the aperture).
+
+        The map of :meth:`truth` sliced ``[::step, ::step]``, made on that grid only: a fit of a
+        decimated map (the station's truth check) needs no full-frame temporaries.
+
+        Parameters
+        ----------
+        time_s : float
+            Seconds.
+        step : int
+            Rows and columns kept, every ``step``-th from 0 (``>= 1``).
+
+        Returns
+        -------
+        ndarray of float64, shape (ceil(height / step), ceil(width / step))
+
+        Example
+        -------
+        >>> disk = ApertureShape(centre_px=(32.0, 32.0), radius_px=28.0)
+        >>> optic = TestOptic(OpticSettings(zernike_waves=(0.0, 0.0, 0.0, 0.2), aperture=disk), 64, 64)
+        >>> np.array_equal(optic.wavefront(1.0, 2), optic.truth(1.0).wavefront_waves[::2, ::2], equal_nan=True)
+        True
+        """
+        t = finite_number(time_s, "time_s")
+        if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 1:
+            raise ValueError(f"step: expected an integer >= 1, got {step!r}")
+        rendering = self._rendering
+        return self._wavefront_at(rendering, self._surface_view(rendering), t, int(step))
+
     def interferogram(self, time_s: float, phase_shift_rad: float = 0.0) -> tuple[NDArray, OpticTruth]:
         """Render one interferogram.
 
@@ -317,6 +347,29 @@ class TestOptic:
         truth : OpticTruth
             With the shift and vibration applied to this frame.
         """
+        frame, rendering, view, facts = self._render(time_s, phase_shift_rad)
+        return frame, self._truth(rendering, view, facts.time_s, facts.phase_shift_rad, facts.vibration_rad,
+                                  facts.carrier_cycles)
+
+    def frame(self, time_s: float, phase_shift_rad: float = 0.0) -> tuple[NDArray, FrameFacts]:
+        """:meth:`interferogram`'s frame (the same for the same call sequence) without the truth's map.
+
+        For a camera rendering 30 frames/s that keeps only what the map is re-made from: the map is
+        a full-frame float64 array per frame. Returns the frame and its :class:`FrameFacts`.
+
+        Example
+        -------
+        >>> disk = ApertureShape(centre_px=(32.0, 32.0), radius_px=28.0)
+        >>> optic = TestOptic(OpticSettings(zernike_waves=(0.0, 0.0, 0.0, 0.2), aperture=disk), 64, 64)
+        >>> pixels, facts = optic.frame(0.5, np.pi / 2)
+        >>> pixels.shape, facts.phase_shift_rad == np.pi / 2, facts.aperture_revision
+        ((64, 64), True, 0)
+        """
+        frame, _, _, facts = self._render(time_s, phase_shift_rad)
+        return frame, facts
+
+    def _render(self, time_s: float, phase_shift_rad: float
+                ) -> tuple[NDArray, _Rendering, SurfaceView | None, FrameFacts]:
         t = finite_number(time_s, "time_s")
         shift = finite_number(phase_shift_rad, "phase_shift_rad")
         settings = self._settings
@@ -332,9 +385,13 @@ class TestOptic:
             vibration = math.sqrt(2.0) * settings.vibration_rms_rad * math.sin(
                 2.0 * math.pi * settings.vibration_hz * t + self._vibration_phase
             )
-        values = (rendering.phase if view is None else view.phase) + np.float32(shift + vibration)
-        if rendering.phase_drift is not None:
-            values += np.float32(t) * rendering.phase_drift
+        phase = rendering.phase if view is None else view.phase
+        if rendering.phase_drift is None:
+            values = phase + np.float32(shift + vibration)
+        else:  # one float32 temporary: the drift term, then the phase and the offset added in place
+            values = rendering.phase_drift * np.float32(t)
+            values += phase
+            values += np.float32(shift + vibration)
         np.cos(values, out=values)
         values *= rendering.amplitude
         values += rendering.offset
@@ -343,8 +400,10 @@ class TestOptic:
         np.clip(values, 0.0, settings.full_scale, out=values)
         np.rint(values, out=values)
         frame = values.astype(np.uint8 if settings.bit_depth == 8 else np.uint16)
-        truth = self._truth(rendering, view, t, shift, vibration, settings.carrier_cycles)
-        return frame, truth
+        del values
+        facts = FrameFacts(t, shift, vibration, (float(settings.carrier_cycles[0]), float(settings.carrier_cycles[1])),
+                           rendering.revision, None if view is None else view.surface_revision)
+        return frame, rendering, view, facts
 
     def _surface_view(self, rendering: _Rendering) -> SurfaceView | None:
         """The phase and wavefront with the current surface on ``rendering``'s aperture (None: no surface)."""
@@ -358,9 +417,7 @@ class TestOptic:
         self, rendering: _Rendering, view: SurfaceView | None, t: float, shift: float, vibration: float,
         carrier: tuple[float, float],
     ) -> OpticTruth:
-        wavefront = rendering.wavefront if view is None else view.wavefront
-        if rendering.wavefront_drift is not None and t != 0.0:
-            wavefront = read_only(wavefront + t * rendering.wavefront_drift)
+        wavefront = self._wavefront_at(rendering, view, t, 1)
         return OpticTruth(
             time_s=t,
             modes=self._modes,
@@ -376,3 +433,17 @@ class TestOptic:
             surface_revision=None if view is None else view.surface_revision,
             surface_nm=None if view is None else view.heights_nm,
         )
+
+    @staticmethod
+    def _wavefront_at(rendering: _Rendering, view: SurfaceView | None, t: float, step: int) -> NDArray[np.float64]:
+        """``W0 + t D`` (with the surface's part) on every ``step``-th row and column, read-only."""
+        wavefront = rendering.wavefront if view is None else view.wavefront  # shared, read-only
+        drift = rendering.wavefront_drift
+        if step > 1:
+            wavefront = wavefront[::step, ::step]
+            drift = None if drift is None else drift[::step, ::step]
+        if drift is None or t == 0.0:
+            return wavefront if step == 1 else read_only(wavefront.copy())
+        values = drift * t  # the one array made, of the grid's size; the map is added in place
+        values += wavefront
+        return read_only(values)

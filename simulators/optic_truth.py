@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from wavestack.simulators.aperture_shape import ApertureShape
 
-__all__ = ["OpticTruth"]
+__all__ = ["FrameFacts", "OpticTruth"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,3 +65,39 @@ class OpticTruth:
     carrier_cycles: tuple[float, float] = (0.0, 0.0)
     surface_revision: int | None = None
     surface_nm: NDArray[np.float64] | None = None
+
+
+@dataclass(frozen=True)
+class FrameFacts:
+    """What one rendered frame was made from, without its wavefront map (:meth:`TestOptic.frame`).
+
+    The map follows from these and the optic (:meth:`TestOptic.truth` at ``time_s``) while the
+    optic's aperture and surface revisions are still these.
+
+    Attributes
+    ----------
+    time_s : float
+        Time the frame shows, seconds.
+    phase_shift_rad : float
+        The ``delta`` applied to the frame, radians.
+    vibration_rad : float
+        The piston jitter applied to the frame, radians.
+    carrier_cycles : (float, float)
+        The carrier ``(nx, ny)`` of the frame, fringes across width and height.
+    aperture_revision : int
+        The optic's aperture revision rendered.
+    surface_revision : int or None
+        The surface's revision rendered (None: an optic without a surface).
+
+    Example
+    -------
+    >>> FrameFacts(0.5, 0.0, 0.01, (0.0, 0.0), 0, None).aperture_revision
+    0
+    """
+
+    time_s: float
+    phase_shift_rad: float
+    vibration_rad: float
+    carrier_cycles: tuple[float, float]
+    aperture_revision: int
+    surface_revision: int | None

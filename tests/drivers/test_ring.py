@@ -54,6 +54,24 @@ def test_a_restarted_frame_count_is_not_a_gap() -> None:
     assert ring.counters().dropped == 0
 
 
+def test_newest_only_holds_one_frame_while_the_consumer_stalls() -> None:
+    class Set:  # stands for a phase set of five 2 MB frames
+        pass
+
+    ring: FrameRing[Set] = FrameRing(3, RingPolicy.NEWEST_ONLY)
+    first = Set()
+    gone = weakref.ref(first)
+    ring.put(first)
+    del first
+    for _ in range(3):
+        ring.put(Set())
+    c = ring.counters()
+    # the superseded frames are dropped and freed when the newer one arrives, not at the next read
+    assert (c.acquired, c.delivered, c.dropped, c.pending) == (4, 0, 3, 1)
+    assert gone() is None
+    assert isinstance(ring.get(0.0), Set) and ring.counters().pending == 0
+
+
 def test_get_times_out_with_a_typed_error_naming_the_device() -> None:
     ring: FrameRing[int] = FrameRing(2, RingPolicy.NEWEST_ONLY, name="camera 42")
     with pytest.raises(DeviceTimeout, match="camera 42"):

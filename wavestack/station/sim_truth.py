@@ -81,19 +81,22 @@ class InterferometerTruthCheck:
         t0 and t0 + 1 s) instead of one fit of a freshly rendered 8 MB map per result. The anchor
         t0 is the first frame compared, renewed every ``_REANCHOR_S``: anchored at t = 0, the
         float32 slope's rounding grew with the device clock (1.3e-6 to 1.9e-6 waves at 4-9 s).
+        Each anchor map is rendered on the fitted grid only (every ``fit_decimation``-th pixel,
+        :meth:`~wavestack.simulators.optic.TestOptic.wavefront`), the values the fit of the full
+        map's slice used: the same coefficients, a quarter of the memory at decimation 2.
         """
         key = (id(choice.fitter), truth.aperture_revision)
         if self._key != key or abs(truth.time_s - self._line[0]) > _REANCHOR_S:
             t0 = truth.time_s
-            start = self._fit(truth.source.truth(t0).wavefront_waves, choice)
-            later = self._fit(truth.source.truth(t0 + 1.0).wavefront_waves, choice)
+            start = self._fit(truth.source.wavefront(t0, self.fit_decimation), choice)
+            later = self._fit(truth.source.wavefront(t0 + 1.0, self.fit_decimation), choice)
             self._key, self._line = key, (t0, start, later - start)
         t0, start, per_second = self._line
         return start + (truth.time_s - t0) * per_second
 
-    def _fit(self, waves: NDArray[np.float64], choice: FitterChoice) -> NDArray[np.float64]:
-        step = self.fit_decimation
-        return choice.fitter.fit(np.asarray(waves)[::step, ::step], nan_policy="omit").coefficients
+    @staticmethod
+    def _fit(waves: NDArray[np.float64], choice: FitterChoice) -> NDArray[np.float64]:
+        return choice.fitter.fit(waves, nan_policy="omit").coefficients
 
 
 @dataclass(eq=False)
