@@ -36,7 +36,7 @@ from align_trials import camera_trial  # noqa: E402
 from wavestack.align import TermFitter, build_sensitivity  # noqa: E402
 from wavestack.align.station_source import fixed_aperture  # noqa: E402
 from wavestack.config.align import load_align_config  # noqa: E402
-from wavestack.simulators.tma import TmaModel  # noqa: E402
+from wavestack.pipeline.telescope import TmaModel  # noqa: E402
 
 
 def _sensitivity_time(config, repeats: int) -> tuple[float, int]:  # noqa: ANN001

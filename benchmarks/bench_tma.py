@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 
 from wavestack.config.tma import load_tma_config  # noqa: E402
 from wavestack.pipeline.zernike import noll_to_nm, zernike_basis  # noqa: E402
-from wavestack.simulators.tma import HexapodPose, TmaDesign, TmaModel  # noqa: E402
+from wavestack.pipeline.telescope import HexapodPose, TmaDesign, TmaModel  # noqa: E402
 
 STEPS = {"x": 0.02, "y": 0.02, "z": 0.02, "u": 0.002, "v": 0.002}  # mm, deg
 FIELDS = ((0.0, -0.6), (-0.5, -0.8), (0.5, -0.4))

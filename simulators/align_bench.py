@@ -1,7 +1,7 @@
 """The simulated TMA alignment bench: a hexapod, a field stage and the telescope they look through.
 
 Two simulated PI GCS controllers (:class:`~wavestack.simulators.pi_gcs.HexapodSimulator`, on
-loopback) and the as-built telescope (:class:`~wavestack.simulators.tma.TmaModel` with seeded
+loopback) and the as-built telescope (:class:`~wavestack.pipeline.telescope.TmaModel` with seeded
 as-built errors and the aligned mirror's unknown mount error). :meth:`AlignmentBench.wavefront`
 renders what the interferometer sees *now*: the field point the field stage's position selects
 (``position / mm_per_deg``, axes 1 and 2 -> theta_x, theta_y) through the pose the hexapod
@@ -10,7 +10,7 @@ switch (:meth:`AlignmentBench.lose_camera`) makes the next renders fail as a los
 
 :class:`SurfaceCoupling` puts the wavefront on a station test optic's surface, so that the
 station's simulated camera records its fringes, with the reference's tilt set as an operator
-sets it (the return spot centred, :func:`centring_tilt`).
+sets it (the return spot centred, :func:`~wavestack.pipeline.telescope.centring_tilt`).
 """
 
 from __future__ import annotations
@@ -22,14 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from wavestack.pipeline.telescope import AsBuiltErrors, HexapodPose, ReferenceTilt, TmaDesign, TmaModel, centring_tilt
 from wavestack.simulators.pi_gcs import HexapodSimSettings, HexapodSimulator
-from wavestack.simulators.tma import AsBuiltErrors, HexapodPose, TmaDesign, TmaModel
 
-__all__ = ["AlignmentBench", "CameraLost", "ReferenceTilt", "SurfaceCoupling", "centring_tilt", "draw_mount"]
-
-#: The reference mount's tilt step, waves per camera pixel (a fringe every 1000 pixels).
-TILT_RESOLUTION = 1e-3
-
+__all__ = ["AlignmentBench", "CameraLost", "SurfaceCoupling", "draw_mount"]
 
 class CameraLost(ConnectionError):
     """The simulated camera stopped delivering frames."""
@@ -149,51 +145,6 @@ class AlignmentBench:
         return BenchFrame(waves, field, pose, exposure)
 
 
-@dataclass(frozen=True)
-class ReferenceTilt:
-    """The tip/tilt the interferometer's reference was set to for one refresh, waves per camera pixel.
-
-    ``x_per_px`` along +col (x right), ``y_per_px`` along -row (y up).
-
-    Example
-    -------
-    >>> ReferenceTilt(0.5, 0.0).plane((2, 3)).tolist()
-    [[-0.5, 0.0, 0.5], [-0.5, 0.0, 0.5]]
-    """
-
-    x_per_px: float = 0.0
-    y_per_px: float = 0.0
-
-    def plane(self, shape: tuple[int, int]) -> NDArray[np.float64]:
-        """The tilt as a map about the grid's centre, waves, shape ``shape``."""
-        rows, cols = np.mgrid[: shape[0], : shape[1]]
-        return self.x_per_px * (cols - (shape[1] - 1) / 2) + self.y_per_px * ((shape[0] - 1) / 2 - rows)
-
-
-def centring_tilt(waves: NDArray[np.floating], resolution: float = TILT_RESOLUTION) -> ReferenceTilt:
-    """The reference tilt that centres the return spot: the map's least-squares plane, rounded.
-
-    The spot's centroid is the mean wavefront slope; the least-squares plane over the pupil is
-    the same to the precision a centring needs. Rounded to ``resolution`` waves per pixel (the
-    reference mount's step): the loop adds back the tilt *set*, not the wavefront's own.
-
-    Example
-    -------
-    >>> t = centring_tilt(ReferenceTilt(0.3, -0.2).plane((8, 16)) + 5.0)
-    >>> round(t.x_per_px, 6), round(t.y_per_px, 6)
-    (0.3, -0.2)
-    """
-    values = np.asarray(waves, dtype=np.float64)
-    rows, cols = np.nonzero(np.isfinite(values))
-    if rows.size < 3:
-        return ReferenceTilt()
-    x = cols - (values.shape[1] - 1) / 2
-    y = (values.shape[0] - 1) / 2 - rows
-    design = np.column_stack([np.ones(rows.size), x, y])
-    (_, sx, sy), *_ = np.linalg.lstsq(design, values[rows, cols], rcond=None)
-    return ReferenceTilt(float(np.round(sx / resolution) * resolution), float(np.round(sy / resolution) * resolution))
-
-
 class SurfaceCoupling:
     """Puts the bench's wavefront on a station test optic's surface, so the station's camera sees it.
 
@@ -207,7 +158,7 @@ class SurfaceCoupling:
     The reference tilt (``null_tilt``) is what an interferometer operator does at each field
     point before measuring: tip/tilt the reference (or follow the image laterally) until the
     return spot is centred in the alignment view, i.e. null the fringes' tilt
-    (:func:`centring_tilt`). A misaligned secondary moves the image by far more than it
+    (:func:`~wavestack.pipeline.telescope.centring_tilt`). A misaligned secondary moves the image by far more than it
     aberrates it: over +-0.3 mm / +-0.03 deg the tilt alone reaches 0.9 waves per pixel on the
     1 mm pixels of the 256 x 128 grid (aliased beyond 0.5), the rest of the map under 0.1
     (docs/alignment.md). The tilt set is returned so that the measurement adds it back: the

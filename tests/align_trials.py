@@ -21,7 +21,7 @@ from wavestack.align.loop import AlignmentLoop, AlignOptions, AlignSummary, Fiel
 from wavestack.align.session import open_session, options_of
 from wavestack.drivers.pi_gcs import HexapodLimits, move_refusals
 from wavestack.simulators.align_bench import draw_mount
-from wavestack.simulators.tma import HexapodPose, TmaModel
+from wavestack.pipeline.telescope import HexapodPose, TmaModel
 
 LIMITS = HexapodLimits(soft={"X": (-5.0, 5.0), "Y": (-5.0, 5.0), "Z": (-2.0, 2.0), "U": (-0.5, 0.5),
                              "V": (-0.5, 0.5), "W": (-0.5, 0.5)},

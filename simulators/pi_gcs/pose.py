@@ -7,7 +7,7 @@ rotation"), and "the rotational axes and therefore also the center of rotation a
 together with the platform"; "a given rotation in space is calculated from the individual
 rotations in the order U -> V -> W". Rotations about axes that move with the platform, U first,
 compose as R = Rx(U) Ry(V) Rz(W) (intrinsic rotations; the driver and the TMA model read the
-manual the same way, ``wavestack.simulators.tma.pose``).
+manual the same way, ``wavestack.pipeline.telescope.pose``).
 A point p of the platform (coordinates at the zero pose) is therefore carried to
 
     p' = R (p - c) + c + T,    T = (X, Y, Z),  c = pivot (R, S, T of ``SPI``)

@@ -24,7 +24,7 @@ from wavestack.align import DOFS, AlignPhase, TermFitter
 from wavestack.align.loop import AlignmentLoop, AlignOptions
 from wavestack.align.session import open_session, options_of
 from wavestack.config.align import load_align_config
-from wavestack.simulators.tma import TmaModel
+from wavestack.pipeline.telescope import TmaModel
 
 TARGET = 1 / 14  # Marechal
 

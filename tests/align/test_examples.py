@@ -7,9 +7,8 @@ import importlib
 
 import pytest
 
-MODULES = ("wavestack.align.state", "wavestack.align.terms", "wavestack.align.sensitivity",
-           "wavestack.align.estimator", "wavestack.align.correction", "wavestack.align.recorder",
-           "wavestack.simulators.align_bench", "wavestack.align.station_source")
+MODULES = ("wavestack.align.state", "wavestack.align.terms", "wavestack.align.estimator", "wavestack.align.correction",
+           "wavestack.align.recorder", "wavestack.simulators.align_bench", "wavestack.align.station_source")
 
 
 @pytest.mark.parametrize("name", MODULES)

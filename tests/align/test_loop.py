@@ -11,7 +11,7 @@ from align_trials import LIMITS, STAGE, MemoryPlatform
 from tma_helpers import example
 from wavestack.align import AlignPhase, TermFitter
 from wavestack.align.loop import AlignmentLoop, AlignOptions, FieldMeasurement
-from wavestack.simulators.tma import HexapodPose, TmaModel
+from wavestack.pipeline.telescope import HexapodPose, TmaModel
 
 DESIGN, AS_BUILT = example()
 MODEL = TmaModel(DESIGN)

@@ -26,8 +26,7 @@ from wavestack.cli.sim_align_bench import announcements, open_remote_bench
 from wavestack.config.align import load_align_config
 from wavestack.config.schema import ConfigError
 from wavestack.pipeline import InputError
-from wavestack.simulators.align_bench import ReferenceTilt
-from wavestack.simulators.tma import HexapodPose, TmaModel
+from wavestack.pipeline.telescope import HexapodPose, ReferenceTilt, TmaModel
 
 SIM = load_align_config()
 MOUNT = HexapodPose(0.12, -0.2, 0.15, 0.015, -0.02, 0.0)

@@ -21,7 +21,7 @@ from wavestack.align.session import check_fringes, open_session
 from wavestack.config.align import load_align_config
 from wavestack.pipeline import InputError
 from wavestack.simulators.align_bench import draw_mount
-from wavestack.simulators.tma import HexapodPose, TmaModel
+from wavestack.pipeline.telescope import HexapodPose, TmaModel
 
 CONFIG = load_align_config()
 

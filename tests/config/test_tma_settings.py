@@ -10,7 +10,7 @@ import pytest
 
 from wavestack.config.schema import ConfigError
 from wavestack.config.tma import load_tma_config, parse_tma_config
-from wavestack.simulators.tma import AsBuiltErrors
+from wavestack.pipeline.telescope import AsBuiltErrors
 
 CONFIG = Path(__file__).resolve().parents[2] / "wavestack" / "config" / "tma-alignment.toml"
 TEXT = CONFIG.read_text(encoding="utf-8")

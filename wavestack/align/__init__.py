@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from wavestack.align.correction import PlannedMove, plan_move
 from wavestack.align.estimator import Estimate, estimate_state
-from wavestack.align.sensitivity import DOFS, Sensitivity, build_sensitivity, model_terms
+from wavestack.pipeline.telescope import DOFS, Sensitivity, build_sensitivity, model_terms
 from wavestack.align.state import (
     TERMINAL_PHASES,
     TRANSITIONS,

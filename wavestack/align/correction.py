@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.align.sensitivity import DOFS
+from wavestack.pipeline.telescope import DOFS
 
 __all__ = ["PlannedMove", "plan_move"]
 

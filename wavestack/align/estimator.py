@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.align.sensitivity import Sensitivity
+from wavestack.pipeline.telescope import Sensitivity
 
 __all__ = ["Estimate", "estimate_state"]
 
@@ -62,7 +62,7 @@ def estimate_state(sensitivity: Sensitivity, measured: NDArray[np.floating], *, 
 
     Examples
     --------
-    >>> from wavestack.align.sensitivity import Sensitivity
+    >>> from wavestack.pipeline.telescope import Sensitivity
     >>> s = Sensitivity(np.vstack([np.eye(5), np.eye(5)]), np.zeros(10), np.zeros(5), np.full(5, 0.1))
     >>> np.round(estimate_state(s, np.tile([1.0, 0, 0, 0, 2.0], 2)).state, 6).tolist()
     [0.1, 0.0, 0.0, 0.0, 0.2]

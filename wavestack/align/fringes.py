@@ -7,7 +7,7 @@ it bounds the slope over the stated misalignment range with the design model, to
 per pixel, ``|grad W(0)| + sum_k |grad W(+r_k) - grad W(-r_k)| / 2`` over the degrees of freedom
 ``k`` with ranges ``r_k`` (a secant over the whole range, which includes the curvature a tangent
 at zero would miss), each map with the reference's tilt removed as the interferometer removes it
-(:func:`~wavestack.simulators.align_bench.centring_tilt`), the gradient the larger of the
+(:func:`~wavestack.pipeline.telescope.centring_tilt`), the gradient the larger of the
 neighbour differences along a row and a column (waves per pixel). The bound is the worst over
 the pixels and the field points.
 
@@ -23,9 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.align.sensitivity import DOFS, WavefrontModel
-from wavestack.simulators.align_bench import ReferenceTilt, centring_tilt
-from wavestack.simulators.tma import HexapodPose
+from wavestack.pipeline.telescope import DOFS, HexapodPose, ReferenceTilt, WavefrontModel, centring_tilt
 
 __all__ = ["MAX_SLOPE_WAVES_PER_PX", "NYQUIST_WAVES_PER_PX", "fringe_slope_bound", "pixel_slope"]
 

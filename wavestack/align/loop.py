@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from wavestack.align.correction import PlannedMove, plan_move
 from wavestack.align.estimator import Estimate, estimate_state
-from wavestack.align.sensitivity import DOFS, WavefrontModel, build_sensitivity
+from wavestack.pipeline.telescope import DOFS, WavefrontModel, build_sensitivity
 from wavestack.align.state import AlignEvent, AlignPhase, AlignState, advance, judge_iteration
 from wavestack.align.terms import TermFitter
 from wavestack.drivers.errors import DeviceError

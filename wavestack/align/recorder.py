@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 
 from wavestack.align.loop import AlignSummary, IterationRecord
-from wavestack.align.sensitivity import DOFS
+from wavestack.pipeline.telescope import DOFS
 
 __all__ = ["AlignRecorder"]
 

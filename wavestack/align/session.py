@@ -34,7 +34,7 @@ from wavestack.config.hexapod import HexapodSettings, build_hexapod
 from wavestack.drivers.pi_gcs import PIHexapod
 from wavestack.pipeline import InputError
 from wavestack.simulators.align_bench import AlignmentBench, SurfaceCoupling, draw_mount
-from wavestack.simulators.tma import HexapodPose, TmaModel
+from wavestack.pipeline.telescope import HexapodPose, TmaModel
 
 logger = logging.getLogger(__name__)
 

@@ -27,7 +27,7 @@ from typing import TextIO
 
 from wavestack.align.loop import AlignmentLoop, AlignSummary, FieldMeasurement, IterationRecord
 from wavestack.align.recorder import AlignRecorder
-from wavestack.align.sensitivity import DOFS
+from wavestack.pipeline.telescope import DOFS
 from wavestack.align.session import open_session, options_of
 from wavestack.align.state import AlignPhase
 from wavestack.cli.arguments import positive_int

@@ -31,7 +31,7 @@ from wavestack.config.station import load_station_config
 from wavestack.pipeline import InputError
 from wavestack.simulators.align_bench import AlignmentBench, SurfaceCoupling, draw_mount
 from wavestack.simulators.align_bench_remote import RemoteAlignBench
-from wavestack.simulators.tma import HexapodPose
+from wavestack.pipeline.telescope import HexapodPose
 from wavestack.station.devices import simulated_interferometer
 
 __all__ = ["announcements", "open_remote_bench", "run_align_bench_simulator"]

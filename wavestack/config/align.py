@@ -19,7 +19,7 @@ from wavestack.config.hexapod_sim import parse_hexapod_sim_config
 from wavestack.config.schema import ConfigError, load_toml, parse_section, setting
 from wavestack.config.tma import parse_tma_config
 from wavestack.simulators.pi_gcs import HexapodSimSettings
-from wavestack.simulators.tma import AsBuiltErrors, TmaDesign
+from wavestack.pipeline.telescope import AsBuiltErrors, TmaDesign
 
 __all__ = ["AlignBenchSettings", "AlignConfig", "AlignSettings", "load_align_config", "parse_align_config"]
 

@@ -1,6 +1,6 @@
 """Configuration of the simulated TMA alignment bench's telescope: table ``[tma]``.
 
-``[tma]`` holds the design (:class:`~wavestack.simulators.tma.TmaDesign`): the mirrors as an array
+``[tma]`` holds the design (:class:`~wavestack.pipeline.telescope.TmaDesign`): the mirrors as an array
 of tables ``[[tma.mirrors]]``, the off-axis pupil ``[tma.pupil]``, field points, wavelength, the
 aligned mirror and its pivot, the camera grid; ``[tma.as_built]`` the seeded as-built errors.
 Other top-level tables are left to their own loaders. Example: ``wavestack/config/tma-alignment.toml``::
@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from wavestack.config.schema import ConfigError, load_toml, parse_section, setting
-from wavestack.simulators.tma import AsBuiltErrors, PupilShape, TmaDesign, TmaMirror
+from wavestack.pipeline.telescope import AsBuiltErrors, PupilShape, TmaDesign, TmaMirror
 
 
 @dataclass(frozen=True)

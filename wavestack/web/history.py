@@ -11,7 +11,7 @@ import math
 from collections.abc import Sequence
 
 from wavestack.align.loop import IterationRecord
-from wavestack.align.sensitivity import DOFS
+from wavestack.pipeline.telescope import DOFS
 from wavestack.polish.run_record import RunRecord
 from wavestack.web.view import Cell
 

@@ -122,7 +122,7 @@ def test_rotations_apply_u_then_v_then_w_about_axes_that_move_with_the_platform(
     fixed = rotation_matrix(0.0, 90.0, 0.0) @ rotation_matrix(90.0, 0.0, 0.0)
     np.testing.assert_allclose(fixed @ [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], atol=1e-12)
     # one rule for the whole bench: the simulator and the telescope model's mirror pose agree
-    from wavestack.simulators.tma import pose_rotation
+    from wavestack.pipeline.telescope import pose_rotation
 
     for angles in [(0.02, -0.03, 0.05), (30.0, 45.0, -60.0), (90.0, 90.0, 0.0)]:
         np.testing.assert_allclose(rotation_matrix(*angles), pose_rotation(*angles), atol=1e-12)

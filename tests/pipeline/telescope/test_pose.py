@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from fuzz import fuzz_settings
 from tma_helpers import example
-from wavestack.simulators.tma import HexapodPose, build_optic, pose_rotation, transform_point
-from wavestack.simulators.tma.pose import rotation_x, rotation_y, rotation_z
+from wavestack.pipeline.telescope import HexapodPose, build_optic, pose_rotation, transform_point
+from wavestack.pipeline.telescope.pose import rotation_x, rotation_y, rotation_z
 
 angles = st.floats(-20.0, 20.0, allow_nan=False)
 

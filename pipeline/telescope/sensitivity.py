@@ -15,27 +15,37 @@ ours, both for numerical soundness:
 
 W (rotation about the axis) is left out: the sensitivity of the terms to W is zero to the
 model's precision for a mirror symmetric about its own axis (the mount model's W is
-unobservable, tests/simulators/tma), so it can only add noise to the solve; the loop never moves W.
+unobservable, tests/pipeline/telescope), so it can only add noise to the solve; the loop never moves W.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.align.terms import TermFitter
-from wavestack.simulators.tma import HexapodPose
+from .pose import HexapodPose
 
-__all__ = ["DOFS", "Sensitivity", "build_sensitivity", "model_terms"]
+__all__ = ["DOFS", "Sensitivity", "TermFit", "WavefrontModel", "build_sensitivity", "model_terms"]
 
 #: The degrees of freedom the loop estimates and moves (PI's axis names); W is unobservable.
 DOFS: tuple[str, ...] = ("X", "Y", "Z", "U", "V")
 
 FloatArray = NDArray[np.float64]
 WavefrontModel = Callable[[tuple[float, float], HexapodPose], NDArray[np.floating]]
+
+
+class TermFit(Protocol):
+    """What the matrix is fitted with: the terms of a map (H, W) in waves, shape (T,).
+
+    The alignment loop passes its measurement's fitter, so the model and the measurement are
+    fitted in one basis on one aperture.
+    """
+
+    def terms(self, waves: NDArray[np.floating]) -> FloatArray: ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,14 +76,14 @@ def _pose(state: FloatArray) -> HexapodPose:
     return HexapodPose(x, y, z, u, v, 0.0)
 
 
-def model_terms(model: WavefrontModel, fields: Sequence[tuple[float, float]], fitter: TermFitter,
+def model_terms(model: WavefrontModel, fields: Sequence[tuple[float, float]], fitter: TermFit,
                 state: NDArray[np.floating]) -> FloatArray:
     """The model's terms at every field point for ``state`` (X Y Z mm, U V deg), shape (F * T,)."""
     pose = _pose(np.asarray(state, dtype=np.float64))
     return np.concatenate([fitter.terms(model(tuple(field), pose)) for field in fields])  # type: ignore[arg-type]
 
 
-def build_sensitivity(model: WavefrontModel, fields: Sequence[tuple[float, float]], fitter: TermFitter, *,
+def build_sensitivity(model: WavefrontModel, fields: Sequence[tuple[float, float]], fitter: TermFit, *,
                       at: NDArray[np.floating], steps: NDArray[np.floating],
                       scales: NDArray[np.floating]) -> Sensitivity:
     """Central-difference sensitivity matrix about ``at`` (module notes).
@@ -84,7 +94,7 @@ def build_sensitivity(model: WavefrontModel, fields: Sequence[tuple[float, float
         ``model(field_deg, pose) -> waves (H, W)``: the *design* telescope (no as-built errors).
     fields : sequence of (float, float)
         Field points, deg.
-    fitter : TermFitter
+    fitter : TermFit
         The measurement's fitter (same method on the same aperture: one basis).
     at, steps, scales : array (5,)
         State to linearise about, finite-difference half steps, column normalisation
@@ -96,10 +106,13 @@ def build_sensitivity(model: WavefrontModel, fields: Sequence[tuple[float, float
 
     Examples
     --------
-    >>> mask = np.ones((16, 48), bool)
-    >>> fitter = TermFitter(mask, 6, method="circle")
-    >>> flat = lambda field, pose: fitter.synthesise([pose.x, pose.y, pose.z, 0, 0])
-    >>> s = build_sensitivity(flat, [(0.0, 0.0)], fitter, at=np.zeros(5), steps=np.full(5, 1e-3),
+    A model whose first three terms are the pose's X, Y, Z (and a fitter that reads them):
+
+    >>> class FirstRow:
+    ...     def terms(self, waves):
+    ...         return np.asarray(waves[0, :5], dtype=np.float64)
+    >>> model = lambda field, pose: np.tile([pose.x, pose.y, pose.z, 0.0, 0.0], (2, 1))
+    >>> s = build_sensitivity(model, [(0.0, 0.0)], FirstRow(), at=np.zeros(5), steps=np.full(5, 1e-3),
     ...                       scales=np.full(5, 0.1))
     >>> bool(np.allclose(s.matrix[:3, :3], 0.1 * np.eye(3)))
     True

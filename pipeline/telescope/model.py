@@ -10,7 +10,7 @@ of radius the exit-pupil distance placed a radius *beyond* the reference point, 
 ``(t0 - t) / lambda``: positive where the wave leads), but about a *fixed* point: the design's
 chief-ray image of the field point, where the bench's interferometer sits. A misaligned mirror
 therefore shows as tilt (image motion) and defocus (image despace) besides the higher terms; the
-piston is removed (mean zero over the pupil). Signs, pinned by tests/simulators/tma/test_model.py:
+piston is removed (mean zero over the pupil). Signs, pinned by tests/pipeline/telescope/test_model.py:
 an image displaced by ``delta`` gives ``dW/d(camera) = J^T delta / R`` (``J`` the camera-to-sphere
 mapping), and a focus beyond the reference point gives a negative Noll Z4. At the design pose the
 map equals ``batoid.wavefront(..., reference='chief')`` (a test checks it).
@@ -54,7 +54,7 @@ class TmaModel:
 
     Examples
     --------
-    >>> from wavestack.simulators.tma import PupilShape, TmaDesign, TmaMirror
+    >>> from wavestack.pipeline.telescope import PupilShape, TmaDesign, TmaMirror
     >>> mirrors = (TmaMirror("M1", 1600.0, -1.350908, 0.0), TmaMirror("M2", 855.0204, -6.258799, 500.0),
     ...            TmaMirror("M3", 1836.3357, -40.39243, 0.0))
     >>> design = TmaDesign(mirrors, 0.0, PupilShape((0.0, 150.0), (240.0, 80.0), 20.0), 326.158,

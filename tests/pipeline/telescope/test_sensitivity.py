@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tma_helpers import example, fit_noll
-from wavestack.simulators.tma import HexapodPose, TmaModel
+from wavestack.pipeline.telescope import HexapodPose, TmaModel
 
 STEPS = {"x": 0.02, "y": 0.02, "z": 0.02, "u": 0.002, "v": 0.002, "w": 0.002}  # mm, deg
 FIELDS = ((0.0, -0.6), (-0.5, -0.8), (0.5, -0.4))

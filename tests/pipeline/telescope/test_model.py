@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tma_helpers import camera_xy_mm, example, fit_noll
-from wavestack.simulators.tma import AsBuiltErrors, HexapodPose, TmaModel
+from wavestack.pipeline.telescope import AsBuiltErrors, HexapodPose, TmaModel
 
 MARECHAL = 1.0 / 14.0
 

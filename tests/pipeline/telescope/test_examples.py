@@ -7,7 +7,8 @@ import importlib
 
 import pytest
 
-MODULES = ("wavestack.simulators.tma.design", "wavestack.simulators.tma.pose", "wavestack.simulators.tma.model")
+MODULES = ("wavestack.pipeline.telescope.design", "wavestack.pipeline.telescope.pose", "wavestack.pipeline.telescope.model",
+           "wavestack.pipeline.telescope.reference", "wavestack.pipeline.telescope.sensitivity")
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -1,7 +1,7 @@
 """The design of an off-axis three-mirror anastigmat (TMA): mirrors, stop, pupil, field, wavelength.
 
 A :class:`TmaDesign` is a plain frozen value (millimetres, degrees, nanometres) that
-:mod:`wavestack.config.tma` reads from a TOML table and :mod:`~wavestack.simulators.tma.optic`
+:mod:`wavestack.config.tma` reads from a TOML table and :mod:`~wavestack.pipeline.telescope.optic`
 turns into a batoid optic. Coordinates are the telescope's global frame as batoid uses it for
 its telescopes: light from the object travels towards ``-z``; the primary's vertex is at the
 origin; ``x`` and ``y`` are the entrance pupil's axes seen from the object side (x right, y up).
