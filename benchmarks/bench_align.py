@@ -33,10 +33,10 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from align_trials import camera_trial  # noqa: E402
-from wavestack.align import TermFitter, build_sensitivity  # noqa: E402
+from wavestack.align import TermFitter  # noqa: E402
 from wavestack.align.station_source import fixed_aperture  # noqa: E402
 from wavestack.config.align import load_align_config  # noqa: E402
-from wavestack.pipeline.telescope import TmaModel  # noqa: E402
+from wavestack.pipeline.telescope import TmaModel, build_sensitivity  # noqa: E402
 
 
 def _sensitivity_time(config, repeats: int) -> tuple[float, int]:  # noqa: ANN001

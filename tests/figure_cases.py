@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from wavestack.bench import PAPER_APERTURES, PaperViews
-from wavestack.bench.paper_views import paper_views
+from wavestack.bench import PAPER_APERTURES
+from wavestack.figures.paper_views import PaperViews
+from wavestack.figures.paper_views import paper_views
 from wavestack.pipeline import Aperture, build_fitter
 
 NAME = "annulus-circular-hole"

@@ -20,11 +20,11 @@ import pytest
 
 from align_trials import LIMITS, camera_trial, run_trial
 from tma_helpers import example
-from wavestack.align import DOFS, AlignPhase, TermFitter
+from wavestack.align import AlignPhase, TermFitter
 from wavestack.align.loop import AlignmentLoop, AlignOptions
 from wavestack.align.session import open_session, options_of
 from wavestack.config.align import load_align_config
-from wavestack.pipeline.telescope import TmaModel
+from wavestack.pipeline.telescope import DOFS, TmaModel
 
 TARGET = 1 / 14  # Marechal
 

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from fuzz import fuzz_settings
 from tma_helpers import example
-from wavestack.align import DOFS, Sensitivity, TermFitter, build_sensitivity, estimate_state, plan_move
-from wavestack.pipeline.telescope import HexapodPose, TmaModel
+from wavestack.align import TermFitter, estimate_state, plan_move
+from wavestack.pipeline.telescope import DOFS, HexapodPose, Sensitivity, TmaModel, build_sensitivity
 
 SOFT = {"X": (-5.0, 5.0), "Y": (-5.0, 5.0), "Z": (-2.0, 2.0), "U": (-0.5, 0.5), "V": (-0.5, 0.5)}
 STEP = {"X": 0.5, "Y": 0.5, "Z": 0.5, "U": 0.05, "V": 0.05}

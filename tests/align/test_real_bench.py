@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from remote_bench import addresses, write_real_config
-from wavestack.align import AlignPhase, TermFitter, build_sensitivity
+from wavestack.align import AlignPhase, TermFitter
 from wavestack.align.loop import AlignmentLoop, AlignSummary
 from wavestack.align.session import open_session, options_of
 from wavestack.align.station_source import fixed_aperture
@@ -26,7 +26,7 @@ from wavestack.cli.sim_align_bench import announcements, open_remote_bench
 from wavestack.config.align import load_align_config
 from wavestack.config.schema import ConfigError
 from wavestack.pipeline import InputError
-from wavestack.pipeline.telescope import HexapodPose, ReferenceTilt, TmaModel
+from wavestack.pipeline.telescope import HexapodPose, ReferenceTilt, TmaModel, build_sensitivity
 
 SIM = load_align_config()
 MOUNT = HexapodPose(0.12, -0.2, 0.15, 0.015, -0.02, 0.0)
@@ -126,7 +126,7 @@ def test_nothing_simulated_on_the_host_side_and_it_converges(tmp_path: Path) -> 
     with ExitStack() as stack:
         remote, config, session = _open(stack, tmp_path)
         assert session.bench is None and session.fitter.remove_tilt
-        assert session.station is not None and session.station.maps.devices.bench is None  # a camera, not a sim
+        assert session.station is not None and session.station.service.devices.bench is None  # a camera, not a sim
         summary, _ = _run(remote, config, session)
         final = remote.bench.hexapod_pose()
     assert summary.state.phase is AlignPhase.TARGET_MET, summary.state.reason

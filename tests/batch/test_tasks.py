@@ -67,26 +67,24 @@ def test_other_files_are_planned_as_reported_skips(tmp_path: Path) -> None:
 
 
 def test_a_polish_campaign_record_is_refitted_map_by_map(tmp_path: Path) -> None:
-    from wavestack.polish.recorder import CampaignRecorder
+    from wavestack.loop import CampaignWriter
 
     yy, xx = np.mgrid[-1:1:40j, -1:1:40j]
     mask = xx ** 2 + yy ** 2 <= 0.9
     path = tmp_path / "polish.h5"
-    recorder = CampaignRecorder(path, (40, 40), "", {"pixel_mm": 1.0, "wavelength_nm": 632.8,
-                                                     "reflection_factor": 2.0})
-    recorder.close("done", "", 0)
-    surfaces = [np.where(mask, 10.0 * (2 * (xx ** 2 + yy ** 2) - 1) * k, np.nan) for k in (1.0, 2.0)]
-    with h5py.File(path, "a") as f:  # what recorder.measurement writes, without a Measurement object
-        f.create_dataset("aperture_mask", data=mask)
-        group = f["measurements"]
-        for column in ("surface_nm", "exposure_unix_s"):
-            group[column].resize(2, axis=0)
-        group["surface_nm"][:] = np.stack(surfaces)
-        group["exposure_unix_s"][:] = [1.0, 2.0]
+    # the records a polishing campaign writes for its measurements (CampaignRecorder.measurement)
+    writer = CampaignWriter(path, "wavestack-polish-campaign", "", {"shape": [40, 40], "pixel_mm": 1.0})
+    surfaces = [np.where(mask, 10.0 * (2 * (xx ** 2 + yy ** 2) - 1) * k, np.nan) for k in (1.0, 2.0, 3.0)]
+    for k, surface in enumerate(surfaces):
+        writer.append_map(surface, units="nm", exposure_unix_s=1.0 + k, mask=mask if k == 0 else None)
+    writer.close({"final_phase": "done"})
+    with h5py.File(path, "r+") as f:  # the third map changed on disk: named, not refitted
+        f["records/000002/map"][20, 20] = 5.0
     plan = plan_recording(str(path), None)
     assert plan.kind == "polish" and plan.sets == 2
     outcome = analyse(plan.tasks[0])
     assert not outcome.error and [r.units for r in outcome.rows] == ["nm", "nm"]
+    assert len(outcome.damage) == 1 and "record 000002: CRC-32 mismatch" in outcome.damage[0]
     first, second = (np.array(r.coefficients) for r in outcome.rows)
     np.testing.assert_allclose(second, 2 * first, atol=1e-6 * np.abs(first).max())  # linear in the map
 

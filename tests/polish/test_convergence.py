@@ -24,7 +24,6 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 
@@ -33,6 +32,7 @@ from shared_data import DATA, require_shared_data
 from wavestack.config.polishing import parse_polishing_config
 from wavestack.drivers.plc import job_file_name
 from wavestack.polish.measurement import remove_ptt, surface_stats
+from wavestack.polish.recorder import read_polish_campaign
 from wavestack.simulators.plc.job_file import read_job_file
 from wavestack.simulators.plc.machine_tif import GaussianTool
 
@@ -62,12 +62,13 @@ def check_runs(session, summary, record: Path) -> list[float]:
     assert all(row.machine_state == "DONE" for row in summary.runs), (summary.state, summary.runs[-1])
     machine = [machine_removal_nm(session, row.job_id) for row in summary.runs]
     noise_nm = session.devices.plc_simulator.machine.settings.noise_nm
-    with h5py.File(record, "r") as f:
-        mask = f["aperture_mask"][()]
-        before = f["runs/measured_nm"][()].astype(np.float64)
-        predicted = f["runs/predicted_residual_nm"][()].astype(np.float64)
-        after = f["runs/measured_residual_nm"][()].astype(np.float64)
-        noise = f["measurements/noise_rms_nm"][()]
+    campaign = read_polish_campaign(record)
+    assert campaign.damage == ()
+    mask = campaign.aperture_mask
+    before = [m["measured_nm"].astype(np.float64) for m in campaign.run_maps]
+    predicted = [m["predicted_residual_nm"].astype(np.float64) for m in campaign.run_maps]
+    after = [m["measured_residual_nm"].astype(np.float64) for m in campaign.run_maps]
+    noise = [m.noise_rms_nm for m in campaign.measurements]
     floors = []
     for k, row in enumerate(summary.runs):
         removal, variance = machine[k]

@@ -8,7 +8,7 @@ import importlib
 import pytest
 
 MODULES = ("wavestack.polish.state", "wavestack.polish.measurement", "wavestack.polish.job_checks",
-           "wavestack.polish.run_record", "wavestack.polish.recorder", "wavestack.polish.plots")
+           "wavestack.polish.run_record", "wavestack.polish.recorder", "wavestack.polish.history")
 
 
 @pytest.mark.parametrize("name", MODULES)

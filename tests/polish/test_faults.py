@@ -13,11 +13,11 @@ import dataclasses
 import math
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 
 from polishing_stations import CountingLink, polishing_config, polishing_session, run_campaign, when_machine_has_points
+from wavestack.polish.recorder import read_polish_campaign
 
 pytestmark = pytest.mark.slow
 
@@ -33,10 +33,11 @@ def _no_job_twice(session, link: CountingLink) -> None:
 
 
 def _recorded(path: Path) -> dict:
-    with h5py.File(path, "r") as f:
-        return {"events": [t.decode() for t in f["events/text"][()]], "runs": int(f["runs/run"].shape[0]),
-                "states": [s.decode() for s in f["runs/machine_state"][()]],
-                "measured": f["runs/measured_rms_nm"][()].tolist(), "job_ids": f["runs/job_id"][()].tolist()}
+    campaign = read_polish_campaign(path)
+    assert campaign.damage == ()
+    return {"events": [f"{phase}: {reason}" for phase, reason in campaign.events], "runs": len(campaign.runs),
+            "states": [r.machine_state for r in campaign.runs], "measured": [r.measured_rms_nm for r in campaign.runs],
+            "job_ids": [r.job_id for r in campaign.runs]}
 
 
 @pytest.mark.parametrize("fault", ["estop", "watchdog", "power-cycle"])

@@ -11,7 +11,7 @@ import pytest
 from wavestack.drivers.errors import DeviceDisconnected
 from wavestack.drivers.plc import PlcRefused
 from wavestack.polish.handoff import state_name, wait_for_done
-from wavestack.station.results import Heartbeat
+from wavestack.station import Heartbeat
 
 
 def _state(name: str) -> SimpleNamespace:

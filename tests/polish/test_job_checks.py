@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from wavestack.polish.job_checks import JobRules, JobUnsafe, check_job
-from wavestack.polish.measurement import ApertureKey, MapSample, average_surface
+from wavestack.polish.measurement import ApertureKey, average_surface
+from wavestack.station import MapSample
 
 RULES = JobRules(max_removal_nm=100.0, max_total_dwell_s=50.0, freshness_s=10.0)
 

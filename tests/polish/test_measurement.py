@@ -8,14 +8,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fuzz import fuzz_settings
-from wavestack.polish.measurement import (
-    ApertureKey,
-    MapSample,
-    UntrustedMeasurement,
-    average_surface,
-    remove_ptt,
-    surface_stats,
-)
+from wavestack.polish.measurement import ApertureKey, average_surface, remove_ptt, surface_stats
+from wavestack.station import MapSample, UntrustedMeasurement
 
 SHAPE = (48, 48)
 

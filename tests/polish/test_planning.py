@@ -15,7 +15,8 @@ from scipy import ndimage
 from fuzz import fuzz_settings
 from wavestack.config.polishing import MachineSettings, PolishingSettings, TifSettings
 from wavestack.pipeline.polishing import GridFrame, ToolInfluence, removal_nm
-from wavestack.polish.measurement import MapSample, average_surface
+from wavestack.polish.measurement import average_surface
+from wavestack.station import MapSample
 from wavestack.polish.planning import GENTLER, NoFittingJob, lattice_points, plan_job
 
 SHAPE, PIXEL_MM = (32, 32), 0.5

@@ -1,4 +1,4 @@
-"""The campaign record: runs written at hand-off and completed in place, measurements, events, the end."""
+"""The campaign record: runs written at hand-off and completed by a later record, measurements, events, the end."""
 
 from __future__ import annotations
 
@@ -7,14 +7,15 @@ import json
 import math
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 
-from wavestack.polish.measurement import MapSample, average_surface
-from wavestack.polish.plots import plot_run
-from wavestack.polish.recorder import FORMAT_NAME, CampaignRecorder
-from wavestack.polish.run_record import run_finished, run_line, run_started
+from wavestack.figures import plot_run
+from wavestack.loop import read_campaign
+from wavestack.polish.measurement import average_surface
+from wavestack.polish.recorder import FORMAT_NAME, CampaignRecorder, read_polish_campaign
+from wavestack.polish.run_record import RunMaps, run_finished, run_line, run_started
+from wavestack.station import MapSample
 
 SHAPE = (20, 24)
 
@@ -33,8 +34,8 @@ def _maps(seed: int = 0):
     return mask, surface, np.abs(rng.normal(0, 1, SHAPE)), np.where(mask, rng.normal(0, 1, SHAPE), np.nan)
 
 
-def test_a_run_is_on_disk_at_hand_off_and_completed_in_place(tmp_path: Path) -> None:
-    path = tmp_path / "campaign.h5"
+def _campaign(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """A one-run campaign record; returns its mask and dwell map."""
     mask, surface, dwell, predicted = _maps()
     recorder = CampaignRecorder(path, SHAPE, "[polishing]\n", {"pixel_mm": 0.25})
     waves = np.where(mask, 0.01, np.nan)
@@ -46,26 +47,50 @@ def test_a_run_is_on_disk_at_hand_off_and_completed_in_place(tmp_path: Path) -> 
                                  job_file=b"job bytes")
     recorder.event("polishing", "job 41 started")
     # readable while the campaign goes on: the run is there, its result not yet
-    with h5py.File(path, "r", locking=False) as f:
-        assert f["runs/job_id"][index] == 41 and math.isnan(f["runs/measured_rms_nm"][index])
-        assert bytes(f["runs/job_file"][index]) == b"job bytes"
+    running = read_polish_campaign(path)
+    assert running.runs[0].job_id == 41 and math.isnan(running.runs[0].measured_rms_nm) and running.ending is None
+    assert bytes(running.run_maps[0]["job_file"]) == b"job bytes"
     done = run_finished(row, measured_rms_nm=8.0, measured_pv_nm=50.0, machine_state="DONE", points_done=1200,
                         run_s=12.0)
-    after = np.where(mask, 1.0, np.nan)
-    recorder.run_updated(index, done, after)
+    recorder.run_updated(index, done, np.where(mask, 1.0, np.nan))
     recorder.close("target-met", "RMS 4 nm <= 5 nm", 1)
     recorder.close("target-met", "again", 1)  # idempotent
-    with h5py.File(path, "r") as f:
-        assert f.attrs["format"] == FORMAT_NAME and f.attrs["final_phase"] == "target-met"
-        assert f.attrs["runs_done"] == 1 and f.attrs["pixel_mm"] == 0.25
-        assert f["runs/convergence_ratio"][0] == pytest.approx(5.0)
-        assert f["runs/machine_state"][0].decode() == "DONE"
-        assert f["runs/job_crc32"][0] == 0xDEADBEEF
-        np.testing.assert_allclose(f["runs/measured_residual_nm"][0][mask], 1.0)
-        np.testing.assert_allclose(f["runs/dwell_s"][0], dwell.astype(np.float32))
-        np.testing.assert_array_equal(f["aperture_mask"][()], mask)
-        assert f["measurements/count"][0] == 2
-        assert f["events/text"][0].decode() == "polishing: job 41 started"
+    return mask, dwell
+
+
+def test_a_run_is_on_disk_at_hand_off_and_completed_by_a_later_record(tmp_path: Path) -> None:
+    path = tmp_path / "campaign.h5"
+    mask, dwell = _campaign(path)
+    campaign = read_polish_campaign(path)
+    assert campaign.damage == () and campaign.ending == {"final_phase": "target-met",
+                                                         "final_reason": "RMS 4 nm <= 5 nm", "runs_done": 1}
+    assert campaign.header["pixel_mm"] == 0.25 and campaign.header["shape"] == list(SHAPE)
+    (run,) = campaign.runs
+    assert run.convergence_ratio == pytest.approx(5.0) and run.machine_state == "DONE"
+    assert run.job_crc32 == 0xDEADBEEF
+    np.testing.assert_allclose(campaign.run_maps[0]["measured_residual_nm"][mask], 1.0)
+    np.testing.assert_allclose(campaign.run_maps[0]["dwell_s"], dwell.astype(np.float32))
+    np.testing.assert_array_equal(campaign.aperture_mask, mask)
+    assert len(campaign.measurements) == 1 and campaign.events == (("polishing", "job 41 started"),)
+
+
+def test_a_changed_record_is_named_and_the_rest_still_reads(tmp_path: Path) -> None:
+    path = tmp_path / "campaign.h5"
+    _campaign(path)
+    log = read_campaign(path, FORMAT_NAME)
+    run = next(entry for entry in log.records if entry.kind == "run")
+    # change one stored dwell value on disk, as a bad sector or an editor would (the file stays valid HDF5)
+    import h5py
+    with h5py.File(path, "r+") as f:
+        stored = f[f"records/{run.index:06d}/dwell_s"]
+        values = stored[()]
+        values[5, 5] += 1.0
+        stored[...] = values
+    campaign = read_polish_campaign(path)
+    assert len(campaign.damage) == 1 and f"record {run.index:06d}: CRC-32 mismatch" in campaign.damage[0]
+    # the hand-off record is lost, its completion is intact: the run still reads, without its hand-off maps
+    assert campaign.runs[0].measured_rms_nm == 8.0 and "dwell_s" not in campaign.run_maps[0]
+    assert campaign.ending is not None and len(campaign.measurements) == 1
 
 
 def test_refuses_a_map_of_another_shape_and_an_unknown_run(tmp_path: Path) -> None:
@@ -100,7 +125,6 @@ def test_json_and_line_of_a_run() -> None:
 
 def test_plot_of_a_run_is_a_png(tmp_path: Path) -> None:
     mask, surface, dwell, predicted = _maps(1)
-    path = plot_run(tmp_path, _row(2), measured_nm=surface, dwell_s=dwell, predicted_residual_nm=predicted,
-                    measured_residual_nm=None, pixel_mm=0.25)
+    path = plot_run(tmp_path, _row(2), RunMaps(surface, dwell, predicted, None), pixel_mm=0.25)
     assert path.name == "run-002.png"
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and path.stat().st_size > 10_000

@@ -8,7 +8,7 @@ import importlib
 import pytest
 
 MODULES = ("wavestack.web.view", "wavestack.web.render", "wavestack.web.slots", "wavestack.web.feed",
-           "wavestack.web.history", "wavestack.web.server", "wavestack.cli.web_view")
+           "wavestack.web.server", "wavestack.cli.web_view", "wavestack.align.history")
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -1,4 +1,4 @@
-"""The web view's feed: the station's records and the loops' callbacks in, one update of the page out."""
+"""The web view's feed: the station's records and the loops' values in, one update of the page out."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from wavestack.align.history import alignment_history
 from wavestack.align.loop import IterationRecord
+from wavestack.polish.history import campaign_history
 from wavestack.polish.run_record import run_finished, run_started
 from wavestack.station import (
     ApertureRecord,
@@ -100,16 +102,18 @@ def test_polishing_runs_and_alignment_iterations_make_the_history() -> None:
                       predicted_pv_nm=30.0, total_dwell_s=900.0, points=4000, job_crc32=1, started_unix_s=0.0,
                       solve_s=1.0)
     feed.loop_phase("polishing", "job 7 running")
-    feed.add_run(row)
-    feed.add_run(run_finished(row, measured_rms_nm=5.0, machine_state="DONE", points_done=4000, run_s=60.0))
+    done = run_finished(row, measured_rms_nm=5.0, machine_state="DONE", points_done=4000, run_s=60.0)
+    feed.show_history(campaign_history([row]))
+    feed.show_history(campaign_history([row, done]))
     history = feed.update().history
     assert (history.kind, history.phase, history.reason) == ("polish", "polishing", "job 7 running")
     assert len(history.rows) == 1 and history.rows[0][:6] == (1, 7, 40.0, 4.0, 5.0, 8.0)  # the later row replaces
     assert history.trend == (40.0, 5.0) and len(history.columns) == len(history.rows[0])
 
     feed = LiveFeed("wavestack align")
-    feed.add_iteration(IterationRecord(0, (0.5, 0.7)))
-    feed.add_iteration(IterationRecord(1, (0.2, 0.1), estimate=(0.1, 0.0, 0.0, 0.0, 0.0), move={"X": -0.1}))
+    feed.show_history(alignment_history([IterationRecord(0, (0.5, 0.7)),
+                                         IterationRecord(1, (0.2, 0.1), estimate=(0.1, 0.0, 0.0, 0.0, 0.0),
+                                                         move={"X": -0.1})]))
     feed.show_map(_map(0.0), units="waves", title="wavefront at field point 1")
     update = feed.update()
     assert update.history.kind == "align" and update.history.trend == (0.7, 0.2)
@@ -119,7 +123,7 @@ def test_polishing_runs_and_alignment_iterations_make_the_history() -> None:
 
 def test_the_message_carries_the_picture_and_the_table_only_when_asked() -> None:
     feed = LiveFeed("wavestack align")
-    feed.add_iteration(IterationRecord(0, (0.5, float("nan"))))
+    feed.show_history(alignment_history([IterationRecord(0, (0.5, float("nan")))]))
     feed.show_map(_map(0.0), units="waves", title="field point 0")
     update = feed.update()
     full = json.loads(update_message(update, BrowserCounts(3, 1, 2, 5), with_png=True, with_history=True))

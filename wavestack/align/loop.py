@@ -1,8 +1,9 @@
 """The alignment loop: field points -> terms -> estimate -> hexapod -> wait -> verify, until it stops.
 
-:class:`AlignmentLoop` drives :mod:`~wavestack.align.state`'s machine: each phase does its one piece
-of work and turns what happened into an event; :func:`~wavestack.align.state.advance` decides where
-to go. On entering a fault or a stop the hexapod is halted (``stop_all``, ``#24``) before anything
+:class:`AlignmentLoop` drives :mod:`~wavestack.align.state`'s machine with the loop kernel's runner
+(:func:`~wavestack.loop.run_machine`): each phase does its one piece of work and turns what
+happened into an event; :func:`~wavestack.align.state.advance` decides where to go. On entering a
+fault or a stop the hexapod is halted (``stop_all``, ``#24``) before anything
 else; a halt that fails is logged and named in the summary (the platform may still move: the
 operator must know). A measurement is refused (UNTRUSTED, no move) when the source raises, when it
 was exposed before the hexapod's last arrival (stale), or when it is not finite on the aperture.
@@ -21,11 +22,12 @@ from numpy.typing import NDArray
 
 from wavestack.align.correction import PlannedMove, plan_move
 from wavestack.align.estimator import Estimate, estimate_state
-from wavestack.pipeline.telescope import DOFS, WavefrontModel, build_sensitivity
 from wavestack.align.state import AlignEvent, AlignPhase, AlignState, advance, judge_iteration
 from wavestack.align.terms import TermFitter
 from wavestack.drivers.errors import DeviceError
 from wavestack.drivers.pi_gcs import PIHexapod
+from wavestack.loop import EventRecord, Transitions, run_machine
+from wavestack.pipeline.telescope import DOFS, WavefrontModel, build_sensitivity
 
 logger = logging.getLogger(__name__)
 
@@ -134,20 +136,24 @@ class AlignmentLoop:
         ``measure(field_index) -> FieldMeasurement``; any exception is a refused measurement.
     options : AlignOptions
     stop : threading.Event
+    recorder : EventRecord, optional
+        Records every transition (the alignment record).
     on_iteration, on_event : callable, optional
     """
 
     def __init__(self, *, design_model: WavefrontModel, fields: Sequence[tuple[float, float]],
                  field_positions: Sequence[dict[str, float]], fitter: TermFitter, hexapod: PIHexapod,
                  field_stage: PIHexapod, measure: Callable[[int], FieldMeasurement], options: AlignOptions,
-                 stop: threading.Event, on_iteration: Callable[[IterationRecord], None] | None = None,
+                 stop: threading.Event, recorder: EventRecord | None = None,
+                 on_iteration: Callable[[IterationRecord], None] | None = None,
                  on_event: Callable[[str, str], None] | None = None) -> None:
         if len(field_positions) != len(fields) or not fields:
             raise ValueError(f"field_positions: expected one per field point ({len(fields)}), got {len(field_positions)}")
         self._model, self._fields, self._positions = design_model, [tuple(f) for f in fields], list(field_positions)
         self._fitter, self._hexapod, self._stage, self._measure = fitter, hexapod, field_stage, measure
         self._options, self._stop = options, stop
-        self._on_iteration, self._on_event = on_iteration, on_event
+        self._on_iteration = on_iteration
+        self._note = Transitions("align", recorder=recorder, on_event=on_event)
 
     def run(self) -> AlignSummary:
         """Run to a terminal phase; returns how it ended (never raises a device error)."""
@@ -156,25 +162,17 @@ class AlignmentLoop:
                  AlignPhase.CHECKING: self._check, AlignPhase.ESTIMATING: self._estimate,
                  AlignPhase.MOVING_HEXAPOD: self._send, AlignPhase.WAITING: self._wait,
                  AlignPhase.VERIFYING: self._verify}
-        self._note(r.state)
-        while not r.state.terminal:
-            if self._stop.is_set():
-                event, reason = AlignEvent.STOP, "stopped by the operator"
-            else:
-                event, reason = steps[r.state.phase](r)
-            r.state = advance(r.state, event, reason)
-            if r.state.halt_on_entry:
-                r.halted = self._halt()
-            self._note(r.state)
+        run_machine(r, steps, advance=advance, stop=self._stop, stop_event=AlignEvent.STOP, note=self._note,
+                    entered=self._entered)
         if r.record is not None:
             self._emit(r)
         return AlignSummary(r.state, tuple(r.records), r.halted)
 
     # ------------------------------------------------------------------ helpers
-    def _note(self, state: AlignState) -> None:
-        logger.info("align: %s (%s)", state.phase.value, state.reason or "")
-        if self._on_event is not None:
-            self._on_event(state.phase.value, state.reason or "")
+    def _entered(self, r: _Run) -> None:
+        """On entering a fault or a stop, halt the hexapod before anything else."""
+        if r.state.halt_on_entry:
+            r.halted = self._halt()
 
     def _emit(self, r: _Run) -> None:
         assert r.record is not None

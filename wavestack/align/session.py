@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from wavestack.align.fringes import MAX_SLOPE_WAVES_PER_PX, fringe_slope_bound
 from wavestack.align.loop import AlignOptions, FieldMeasurement
-from wavestack.align.station_source import StationMaps, StationSource, fixed_aperture
+from wavestack.align.station_source import StationSource, fixed_aperture, open_station_service
 from wavestack.align.terms import TermFitter
 from wavestack.config.align import AlignConfig
 from wavestack.config.hexapod import HexapodSettings, build_hexapod
@@ -144,8 +144,8 @@ def open_real_session(config: AlignConfig, stack: ExitStack) -> AlignSession:
     fitter = TermFitter(mask, config.align.max_noll, method=config.align.fit_method, remove_tilt=True)
     hexapod = _driver(config.hexapod, stack)
     stage = _driver(config.field_stage, stack)
-    maps = StationMaps(station_path, stack)
-    station = StationSource(maps, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
+    service = open_station_service(station_path, stack)
+    station = StationSource(service, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
                             timeout_s=config.align.measure_timeout_s)
     logger.info("align: real bench: hexapod %s, field stage %s, station %s (tilt removed from fit and RMS)",
                 config.hexapod.url, config.field_stage.url, station_path)
@@ -200,15 +200,15 @@ def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | 
 def _coupled_station(config: AlignConfig, station_path: Path, bench: AlignmentBench, mask: NDArray[np.bool_],
                      stack: ExitStack) -> StationSource:
     """The simulated station with the telescope coupled to its optic (the reference's tilt added back)."""
-    maps = StationMaps(station_path, stack)
-    optic = getattr(maps.devices.bench, "optic", None)
-    reflection = getattr(getattr(maps.config.optic, "surface", None), "reflection_factor", 2.0)
-    coupling = SurfaceCoupling(bench, getattr(optic, "surface", None), maps.config.station.wavelength_nm,
+    service = open_station_service(station_path, stack)
+    optic = getattr(service.devices.bench, "optic", None)
+    reflection = getattr(getattr(service.config.optic, "surface", None), "reflection_factor", 2.0)
+    coupling = SurfaceCoupling(bench, getattr(optic, "surface", None), service.config.station.wavelength_nm,
                                reflection, null_tilt=config.align.null_tilt)
 
     def prepare() -> NDArray[np.float64]:
         frame, tilt = coupling.refresh()
         return tilt.plane(frame.waves.shape)
 
-    return StationSource(maps, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
+    return StationSource(service, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
                          timeout_s=config.align.measure_timeout_s, prepare=prepare)

@@ -5,9 +5,10 @@ misalignment, move the hexapod, wait on target, verify the position read back; t
 iteration. The loop stops at the target RMS at every field point, after ``max_iterations``
 corrections, when the wavefront stops improving, on any fault, or when the operator stops it.
 Each stop is a terminal phase naming why, and a terminal phase never leaves (every later event is
-ignored), so nothing moves after a stop. :data:`TRANSITIONS` is the whole machine;
-:func:`advance` applies it. An event a phase does not expect ends the loop in
-:attr:`AlignPhase.FAULTED`, naming both (the safe reading of the unexpected).
+ignored), so nothing moves after a stop. :data:`TABLE` (the loop kernel's
+:class:`~wavestack.loop.StateTable`) is the whole machine; :func:`advance` applies it and counts
+field points and corrections. An event a phase does not expect ends the loop in
+:attr:`AlignPhase.FAULTED`, naming both (the kernel's rule).
 
 Only :attr:`AlignEvent.MEASURED` leaves measuring for the next field point or the check, and only
 a check that asks for more work leads to estimating, so a hexapod move is never computed from a
@@ -21,7 +22,10 @@ import enum
 from dataclasses import dataclass, replace
 from typing import Final
 
-__all__ = ["AlignEvent", "AlignPhase", "AlignState", "TERMINAL_PHASES", "TRANSITIONS", "advance", "judge_iteration"]
+from wavestack.loop import StateTable
+
+__all__ = ["AlignEvent", "AlignPhase", "AlignState", "TABLE", "TERMINAL_PHASES", "TRANSITIONS", "advance",
+           "judge_iteration"]
 
 
 class AlignPhase(enum.Enum):
@@ -65,7 +69,7 @@ TERMINAL_PHASES: Final = frozenset({AlignPhase.TARGET_MET, AlignPhase.MAX_ITERAT
 
 _P, _E = AlignPhase, AlignEvent
 #: (phase, event) -> next phase for every expected event; FAULT and STOP everywhere non-terminal.
-TRANSITIONS: Final[dict[tuple[AlignPhase, AlignEvent], AlignPhase]] = {
+TABLE: Final = StateTable.build({
     (_P.MOVING_FIELD, _E.FIELD_REACHED): _P.MEASURING,
     (_P.MEASURING, _E.MEASURED): _P.MOVING_FIELD,
     (_P.MEASURING, _E.ALL_MEASURED): _P.CHECKING,
@@ -78,9 +82,8 @@ TRANSITIONS: Final[dict[tuple[AlignPhase, AlignEvent], AlignPhase]] = {
     (_P.MOVING_HEXAPOD, _E.MOVE_SENT): _P.WAITING,
     (_P.WAITING, _E.ON_TARGET): _P.VERIFYING,
     (_P.VERIFYING, _E.VERIFIED): _P.MOVING_FIELD,
-    **{(phase, _E.FAULT): _P.FAULTED for phase in _P if phase not in TERMINAL_PHASES},
-    **{(phase, _E.STOP): _P.INTERRUPTED for phase in _P if phase not in TERMINAL_PHASES},
-}
+}, phases=_P, terminal=TERMINAL_PHASES, faulted=_P.FAULTED, interrupted=_P.INTERRUPTED, fault=_E.FAULT, stop=_E.STOP)
+TRANSITIONS: Final = TABLE.transitions
 
 
 @dataclass(frozen=True)
@@ -131,21 +134,15 @@ def advance(state: AlignState, event: AlignEvent, reason: str | None = None) -> 
     >>> (s.phase.value, s.iterations_done, s.field_index)
     ('moving-field', 1, 0)
     """
-    if state.terminal:
-        return state
-    following = TRANSITIONS.get((state.phase, event))
-    if following is None:
-        return replace(state, phase=AlignPhase.FAULTED,
-                       reason=f"unexpected event {event.value!r} while {state.phase.value}"
-                              + (f" ({reason})" if reason else ""))
-    index = state.field_index
-    iterations = state.iterations_done
+    step = TABLE.step(state.phase, event, reason, state.reason)
+    if not step.expected:
+        return replace(state, phase=step.phase, reason=step.reason)
+    index, iterations = state.field_index, state.iterations_done
     if event is AlignEvent.MEASURED:
         index += 1
     elif event is AlignEvent.VERIFIED:
         index, iterations = 0, iterations + 1
-    kept = reason if reason is not None else (state.reason if following in TERMINAL_PHASES else None)
-    return AlignState(following, iterations, index, kept)
+    return AlignState(step.phase, iterations, index, step.reason)
 
 
 def judge_iteration(rms_waves: tuple[float, ...], previous_worst: float | None, iterations_done: int, *,

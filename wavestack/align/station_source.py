@@ -1,18 +1,17 @@
 """The alignment measurement through the station: interferograms, phase, unwrapped maps, averaged.
 
-With ``[align] station = "FILE.toml"`` the session opens that station with the station's own
-device code (:func:`~wavestack.station.open_station_devices`: a real USB3 Vision camera and piezo,
-or the simulated ones), runs it on its own thread feeding a
-:class:`~wavestack.polish.live_maps.LiveMaps` (:class:`StationMaps`), and measures a field point
-as: wait for ``averaged`` valid maps in a row exposed after the call (the loop calls it once the
-field stage and the hexapod are on target), average them on the fixed aperture, subtract the
-piston. The fixed aperture is the model's pupil less ``edge_px`` rim pixels (the station's
+With ``[align] station = "FILE.toml"`` the session opens that station as the station service
+(:class:`~wavestack.station.StationService`: the station's own device code, a real USB3 Vision
+camera and piezo or the simulated ones, the station on its own thread feeding its averaged maps),
+and measures a field point as: wait for ``averaged`` valid maps in a row exposed after the call
+(the loop calls it once the field stage and the hexapod are on target), average them on the
+fixed aperture, subtract the piston. The fixed aperture is the model's pupil less ``edge_px`` rim pixels (the station's
 detected aperture loses a few rim pixels, docs/station.md); a map not finite on it is refused, and
 the sensitivity matrix is fitted on the same aperture with the same fitter.
 
 :class:`StationSource` is that measurement, with an optional ``prepare`` step called first: on
 the simulated bench it is the coupling of the telescope to the station's test optic
-(:class:`~wavestack.simulators.align_bench.SurfaceCoupling`, wired by the session), which returns
+(the simulated bench's surface coupling, wired by the simulator starter), which returns
 the tilt the interferometer's reference took out so that it is added back. On a real bench there
 is no such step: the reference's tilt is not known to the loop, which fits and judges without
 tilt (:class:`~.terms.TermFitter` ``remove_tilt``).
@@ -20,7 +19,6 @@ tilt (:class:`~.terms.TermFitter` ``remove_tilt``).
 
 from __future__ import annotations
 
-import logging
 import threading
 import time
 from collections.abc import Callable
@@ -33,13 +31,9 @@ from scipy import ndimage
 
 from wavestack.align.loop import FieldMeasurement
 from wavestack.config.station import load_station_config
-from wavestack.config.station_schema import StationConfig
-from wavestack.polish.live_maps import LiveMaps
-from wavestack.station import Station, StationDevices, open_station_devices
+from wavestack.station import StationService
 
-logger = logging.getLogger(__name__)
-
-__all__ = ["StationMaps", "StationSource", "fixed_aperture"]
+__all__ = ["StationSource", "fixed_aperture", "open_station_service"]
 
 #: ``prepare()`` before a measurement: returns a map (H, W) to add to the averaged maps (waves), or None.
 Prepare = Callable[[], NDArray[np.float64] | None]
@@ -59,62 +53,15 @@ def fixed_aperture(pupil: NDArray[np.bool_], edge_px: int) -> NDArray[np.bool_]:
     return ndimage.binary_erosion(pupil, structure=np.ones((3, 3), bool), iterations=edge_px)
 
 
-class StationMaps:
-    """A station running on its own thread, handing averaged maps to a measurement (module notes).
-
-    Parameters
-    ----------
-    station_config : Path
-        The station TOML (real devices or ``sim://``); its camera grid must be the TMA's.
-    stack : ExitStack
-        Closes the station's thread, the station and its devices.
+def open_station_service(station_config: Path, stack: ExitStack) -> StationService:
+    """The station of ``[align] station`` running as a service (its camera grid must be the TMA's).
 
     Raises
     ------
     ConfigError, DeviceError
         The station file, or a device that does not open.
     """
-
-    def __init__(self, station_config: Path, stack: ExitStack) -> None:
-        self.config: StationConfig = load_station_config(station_config)
-        self.devices: StationDevices = open_station_devices(self.config, stack)
-        self._maps = LiveMaps()
-        self._stop = threading.Event()
-        station = Station(self.config, self.devices)
-        stack.callback(station.close)
-        halt = threading.Event()
-
-        def serve() -> None:
-            why = "stopped"
-            try:
-                station.run(stop=halt, on_result=self._maps)
-            except Exception as error:  # the loop sees it as a refused measurement
-                logger.error("align: the station stopped: %s", error, exc_info=True)
-                why = f"{type(error).__name__}: {error}"
-            finally:
-                self._maps.end(why)
-
-        thread = threading.Thread(target=serve, name="align-station")
-        thread.start()
-
-        def stop_serving() -> None:
-            self._stop.set()
-            halt.set()
-            thread.join()
-
-        stack.callback(stop_serving)
-
-    def average(self, count: int, not_before_ns: int, timeout_s: float) -> NDArray[np.float64]:
-        """The mean of ``count`` valid maps in a row exposed at or after ``not_before_ns``, waves (H, W).
-
-        Raises
-        ------
-        UntrustedMeasurement
-            Not enough valid maps in time, or the station stopped.
-        """
-        samples = self._maps.collect(count, max_results=count * 4, not_before_ns=not_before_ns,
-                                     timeout_s=timeout_s, stop=self._stop)
-        return np.mean([np.asarray(s.waves, dtype=np.float64) for s in samples], axis=0)
+    return StationService(load_station_config(station_config), stack, name="align-station")
 
 
 class StationSource:
@@ -122,7 +69,7 @@ class StationSource:
 
     Parameters
     ----------
-    maps : StationMaps
+    service : StationService
     mask : ndarray (H, W) of bool
         The fixed aperture.
     averaged : int
@@ -137,9 +84,10 @@ class StationSource:
         bench's reference tilt).
     """
 
-    def __init__(self, maps: StationMaps, mask: NDArray[np.bool_], *, averaged: int = 3, timeout_s: float = 30.0,
-                 settle_s: float = 0.0, prepare: Prepare | None = None) -> None:
-        self.maps = maps
+    def __init__(self, service: StationService, mask: NDArray[np.bool_], *, averaged: int = 3,
+                 timeout_s: float = 30.0, settle_s: float = 0.0, prepare: Prepare | None = None) -> None:
+        self.service = service
+        self._stop = threading.Event()
         self._mask, self._averaged, self._timeout_s = np.asarray(mask, dtype=bool), averaged, timeout_s
         self._settle_ns = int(round(settle_s * 1e9))
         self._prepare = prepare
@@ -148,7 +96,8 @@ class StationSource:
         """Average the maps exposed ``settle_s`` after this call on the fixed aperture (raises if untrusted)."""
         added = self._prepare() if self._prepare is not None else None
         after = time.time_ns() + self._settle_ns
-        waves = self.maps.average(self._averaged, after, self._timeout_s + self._settle_ns * 1e-9)
+        waves = self.service.maps.average(self._averaged, not_before_ns=after,
+                                          timeout_s=self._timeout_s + self._settle_ns * 1e-9, stop=self._stop)
         if added is not None:
             waves = waves + added
         if not np.all(np.isfinite(waves[self._mask])):

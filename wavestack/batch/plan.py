@@ -24,6 +24,7 @@ import h5py
 import numpy as np
 
 from wavestack import __version__
+from wavestack.loop import MAP_KIND, read_campaign
 from wavestack.pipeline import InputError
 from wavestack.recording import FORMAT_NAME, RecordingReader
 from wavestack.recording.hdf5_open import open_hdf5_readonly
@@ -180,26 +181,35 @@ def _inspect(path: str) -> tuple[Kind, int, list[int], str]:
         attrs = opened.file.attrs
         found = attrs.get("format")
         found = found.decode("utf-8", "replace") if isinstance(found, bytes) else found
-        if found == POLISH_FORMAT:
-            surfaces = opened.file.get("measurements/surface_nm")
-            if surfaces is None or "aperture_mask" not in opened.file:
-                return "unreadable", 0, [], f"{path}: polish campaign record without stored surface maps"
-            return "polish", int(surfaces.shape[0]), [], ""
         if found == ALIGN_FORMAT:
             return "unsupported", 0, [], (f"{path}: an alignment record (wavestack align) holds fitted terms and "
                                           "hexapod moves, not frames or maps; not a station recording, nothing "
                                           "to re-analyse")
-        if found != FORMAT_NAME:
+        if found != FORMAT_NAME and found != POLISH_FORMAT:
             return "unsupported", 0, [], (f"{path}: not a station recording (format {found!r}; expected "
                                           f"{FORMAT_NAME!r} from wavestack run --record)")
         from_sets = _first_sets(opened.file)
     finally:
         opened.file.close()
+    if found == POLISH_FORMAT:
+        return _inspect_campaign(path)
     try:
         with RecordingReader(path) as reader:
             return "station", reader.n_sets, _adoption_positions(reader.set_indices, from_sets), ""
     except InputError as error:
         return "unreadable", 0, [], str(error)
+
+
+def _inspect_campaign(path: str) -> tuple[Kind, int, list[int], str]:
+    """A polishing campaign's record: its intact measured maps (the loop kernel's map records)."""
+    try:
+        log = read_campaign(Path(path), POLISH_FORMAT)
+    except InputError as error:
+        return "unreadable", 0, [], str(error)
+    maps = log.of_kind(MAP_KIND)
+    if not maps or "aperture_mask" not in maps[0].arrays:
+        return "unreadable", 0, [], f"{path}: polish campaign record without an intact first surface map"
+    return "polish", len(maps), [], ""
 
 
 def _first_sets(file: h5py.File) -> np.ndarray:

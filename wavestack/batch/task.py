@@ -20,9 +20,9 @@ from numpy.typing import NDArray
 from wavestack.batch.plan import Task
 from wavestack.batch.rows import STAGES, ResultRow, SkippedItem, TaskOutcome, station_row
 from wavestack.config import ProcessingSettings, parse_station_config
+from wavestack.loop import MAP_KIND, read_campaign
 from wavestack.pipeline import FitResult, Fitter, InputError, build_fitter
 from wavestack.recording import RecordingDamaged, RecordingReader, recorded_config, replay
-from wavestack.recording.hdf5_open import open_hdf5_readonly
 from wavestack.recording.replay import SkippedSet
 
 logger = logging.getLogger(__name__)
@@ -127,24 +127,25 @@ def _station(task: Task) -> TaskOutcome:
 
 
 def _polish(task: Task) -> TaskOutcome:
-    """Refit a polishing campaign's stored surface maps (nm) on its aperture, in one block."""
+    """Refit a polishing campaign's intact surface maps (nm) on its aperture, in one block.
+
+    The record is read by the loop kernel's reader: every map record whose CRC-32 holds is
+    refitted; a damaged one is named in the outcome's damage.
+    """
     settings = (ProcessingSettings() if task.config_text is None
                 else parse_station_config(task.config_text, source=f"{task.path} (batch settings)").processing)
-    opened = open_hdf5_readonly(Path(task.path))
-    with opened.file as file:
-        try:
-            mask = np.asarray(file["aperture_mask"][:], dtype=bool)
-            surfaces = file["measurements/surface_nm"]
-            times = np.asarray(file["measurements/exposure_unix_s"][:], dtype=np.float64)
-        except (KeyError, OSError, RuntimeError, ValueError) as error:
-            return TaskOutcome(error=f"{task.path}: polish campaign record unreadable ({error})")
-        maps, positions, skipped = [], [], []
-        for position in range(task.start, task.stop):
-            try:
-                maps.append(np.asarray(surfaces[position], dtype=np.float64))
-                positions.append(position)
-            except (OSError, RuntimeError, ValueError) as error:
-                skipped.append(SkippedItem(position, position, f"surface map {position} unreadable ({error})"))
+    try:
+        log = read_campaign(Path(task.path))
+    except InputError as error:
+        return TaskOutcome(error=f"{task.path}: polish campaign record unreadable ({error})")
+    records = log.of_kind(MAP_KIND)
+    if not records or "aperture_mask" not in records[0].arrays:
+        return TaskOutcome(error=f"{task.path}: polish campaign record without an intact first surface map")
+    mask = np.asarray(records[0].arrays["aperture_mask"], dtype=bool)
+    chosen = records[task.start:task.stop]
+    maps = [np.asarray(r.arrays["map"], dtype=np.float64) for r in chosen]
+    positions = list(range(task.start, task.start + len(chosen)))
+    times = [float(r.fields.get("exposure_unix_s") or np.nan) for r in records]
     fit = settings.fit_settings()
     fitter = build_fitter(mask, method=fit.method, modes=fit.modes, ordering=fit.ordering, remove=fit.remove,
                           mesh_vertices=fit.mesh_vertices, fallback="qr" if fit.method in ("csf-qcm", "conformal")
@@ -153,8 +154,7 @@ def _polish(task: Task) -> TaskOutcome:
     fits = fit_block(fitter, np.stack(maps), nan_policy="omit", residual=True) if maps else []
     fit_s = time.perf_counter() - tick
     rows = [_polish_row(task.path, p, times, mask, fitter, r) for p, r in zip(positions, fits)]
-    return TaskOutcome(tuple(rows), tuple(skipped), tuple(s.reason for s in skipped),
-                       stage_s=(0.0, 0.0, 0.0, fit_s))
+    return TaskOutcome(tuple(rows), (), log.damage, stage_s=(0.0, 0.0, 0.0, fit_s))
 
 
 def _polish_row(path: str, position: int, times: Sequence[float], mask: NDArray[np.bool_], fitter: Any,

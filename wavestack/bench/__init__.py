@@ -7,7 +7,6 @@ example and the numerical benchmarks use them.
 from __future__ import annotations
 
 from wavestack.bench.paper import PaperCase, PaperRow, format_markdown, rows_as_json, run_paper_benchmark, run_paper_cases
-from wavestack.bench.paper_views import MapView, PaperViews
 from wavestack.bench.paper_apertures import (
     PAPER_APERTURES,
     annulus_circular_hole_mask,
@@ -20,7 +19,7 @@ from wavestack.bench.station import carrier_config, changed_aperture, machine_st
 from wavestack.bench.station_figures import STAGES, MachineState, StationPathFigures, figures_json, format_figures, targets
 
 __all__ = [
-    "MachineState", "MapView", "PAPER_APERTURES", "PaperCase", "PaperRow", "PaperViews", "STAGES",
+    "MachineState", "PAPER_APERTURES", "PaperCase", "PaperRow", "STAGES",
     "StationPathFigures", "annulus_circular_hole_mask",
     "annulus_triangular_hole_mask", "butterfly_mask", "carrier_config", "changed_aperture", "figures_json",
     "format_figures", "format_markdown", "machine_state", "measure_path", "rectangle_mask",

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.bench.paper_apertures import PAPER_APERTURES
-from wavestack.bench.paper_views import PaperViews, paper_views
+from wavestack.figures.paper_views import PaperViews, paper_views
 from wavestack.pipeline import Aperture, Pupil, build_fitter, mode_list, zernike_basis
 from wavestack.pipeline import MappingOptions, Samples, build_canonical_map, mapped_columns
 

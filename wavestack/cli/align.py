@@ -25,22 +25,21 @@ from contextlib import ExitStack
 from pathlib import Path
 from typing import TextIO
 
+from wavestack import __version__
+from wavestack.align import TABLE, alignment_history
 from wavestack.align.loop import AlignmentLoop, AlignSummary, FieldMeasurement, IterationRecord
 from wavestack.align.recorder import AlignRecorder
-from wavestack.pipeline.telescope import DOFS
 from wavestack.align.session import open_session, options_of
-from wavestack.align.state import AlignPhase
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
+from wavestack.cli.loop_exit import loop_exit
 from wavestack.cli.outputs import json_text
 from wavestack.cli.signals import stop_on_signals
 from wavestack.cli.web_view import add_web_arguments, chain, open_web_view
 from wavestack.config.align import load_align_config
+from wavestack.pipeline.telescope import DOFS
 from wavestack.recording import check_recording_path
 from wavestack.web import LiveFeed
-
-EXIT_FAULT = 3
-EXIT_INTERRUPTED = 130
 
 
 def _positive_float(text: str) -> float:
@@ -102,6 +101,16 @@ def _shown_on(feed: LiveFeed, measure: Callable[[int], FieldMeasurement]) -> Cal
     return measured
 
 
+def _history_on(feed: LiveFeed) -> Callable[[IterationRecord], None]:
+    """Each iteration shown in the web view's history table."""
+    records: list[IterationRecord] = []
+
+    def shown(record: IterationRecord) -> None:
+        records.append(record)
+        feed.show_history(alignment_history(records))
+    return shown
+
+
 def run_align(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Run one alignment; returns the exit status (module notes)."""
     record_to = check_recording_path(args.record) if args.record else None
@@ -114,7 +123,8 @@ def run_align(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         session = open_session(config, stack)
         recorder = None
         if record_to is not None:
-            recorder = AlignRecorder(record_to, config.text, config.design.field_points_deg)
+            recorder = AlignRecorder(record_to, config.text, config.design.field_points_deg,
+                                     software_version=__version__)
             stack.callback(recorder.close, "faulted", "the command ended by an error", -1, None)
 
         def on_iteration(record: IterationRecord) -> None:
@@ -125,8 +135,8 @@ def run_align(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         arguments = session.loop_arguments()
         if web is not None:
             arguments["measure"] = _shown_on(web, session.measure)
-        summary = AlignmentLoop(**arguments, options=options, stop=stop,  # type: ignore[arg-type]
-                                on_iteration=chain(on_iteration, web.add_iteration if web else None),
+        summary = AlignmentLoop(**arguments, options=options, stop=stop, recorder=recorder,  # type: ignore[arg-type]
+                                on_iteration=chain(on_iteration, _history_on(web) if web else None),
                                 on_event=web.loop_phase if web else None).run()
         if web is not None:
             web.end(f"{summary.state.phase.value} after {summary.state.iterations_done} correction(s): "
@@ -134,12 +144,7 @@ def run_align(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         if recorder is not None:
             recorder.finish(summary)
     printer.summary(summary)
-    if summary.state.phase is AlignPhase.INTERRUPTED:
-        return EXIT_INTERRUPTED
-    if summary.state.phase is AlignPhase.FAULTED:
-        print(f"wavestack align: device error: {summary.state.reason}", file=sys.stderr)
-        return EXIT_FAULT
-    return 0
+    return loop_exit("align", TABLE, summary.state.phase, summary.state.reason)
 
 
 COMMAND = Command(

@@ -18,6 +18,7 @@ import argparse
 import logging
 import sys
 import threading
+from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 from typing import TextIO
@@ -25,22 +26,20 @@ from typing import TextIO
 from wavestack import __version__
 from wavestack.cli.arguments import positive_int
 from wavestack.cli.command import Command
+from wavestack.cli.loop_exit import loop_exit
 from wavestack.cli.outputs import check_plots_folder, json_text
 from wavestack.cli.signals import stop_on_signals
 from wavestack.cli.web_view import add_web_arguments, chain, open_web_view
-from wavestack.config.polishing import load_polishing_config
-from wavestack.pipeline import InputError
+from wavestack.config.polishing import PolishingConfig, load_polishing_config
+from wavestack.figures import plot_run
+from wavestack.polish import TABLE, RunMaps, RunRecord, campaign_history, run_line
 from wavestack.polish.loop import CampaignSummary, LoopOptions, PolishingLoop
 from wavestack.polish.recorder import CampaignRecorder
-from wavestack.polish.run_record import RunRecord, run_line
 from wavestack.polish.session import open_session
-from wavestack.polish.state import LoopPhase
 from wavestack.recording import check_recording_path
+from wavestack.web import LiveFeed
 
 logger = logging.getLogger(__name__)
-
-EXIT_FAULT = 3
-EXIT_INTERRUPTED = 130
 
 
 def _non_negative_float(text: str) -> float:
@@ -92,6 +91,25 @@ class _Printer:
         self._stream.flush()
 
 
+def _history_on(feed: LiveFeed) -> Callable[[RunRecord], None]:
+    """Each completed run shown in the web view's history table."""
+    rows: list[RunRecord] = []
+
+    def shown(row: RunRecord) -> None:
+        rows.append(row)
+        feed.show_history(campaign_history(rows))
+    return shown
+
+
+def _figures_in(folder: Path, config: PolishingConfig) -> Callable[[RunRecord, RunMaps], None]:
+    """Each completed run drawn into ``folder`` (``run-NNN.png``)."""
+    settings = config.polishing
+
+    def drawn(row: RunRecord, maps: RunMaps) -> None:
+        plot_run(folder, row, maps, pixel_mm=settings.pixel_mm, step_px=settings.machine.step_px)
+    return drawn
+
+
 def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """Run one polishing campaign; returns the exit status (module notes)."""
     # every path first: a typo in --record or --plots must not cost opening every device
@@ -119,8 +137,9 @@ def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
             # an exception still ends the file in a clear state (close is idempotent)
             stack.callback(recorder.close, "faulted", "the command ended by an error", -1)
         loop = PolishingLoop(config, options, link=session.link, maps=session.maps, tif=session.tif,
-                             job_folder=session.job_folder, stop=stop, recorder=recorder, plots=plots,
-                             target_nm=session.target_nm, on_run=chain(printer.run, web.add_run if web else None),
+                             job_folder=session.job_folder, stop=stop, recorder=recorder, target_nm=session.target_nm,
+                             on_run=chain(printer.run, _history_on(web) if web else None),
+                             on_run_maps=_figures_in(plots, config) if plots is not None else None,
                              on_event=chain(printer.event, web.loop_phase if web else None))
         summary = loop.run()
         if web is not None:
@@ -128,12 +147,7 @@ def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
         if recorder is not None:
             recorder.close(summary.state.phase.value, summary.state.reason or "", summary.state.runs_done)
     printer.summary(summary)
-    if summary.state.phase is LoopPhase.INTERRUPTED:
-        return EXIT_INTERRUPTED
-    if summary.state.phase is LoopPhase.FAULTED:
-        print(f"wavestack polish: device error: {summary.state.reason}", file=sys.stderr)
-        return EXIT_FAULT
-    return 0
+    return loop_exit("polish", TABLE, summary.state.phase, summary.state.reason)
 
 
 COMMAND = Command(

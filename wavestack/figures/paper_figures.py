@@ -6,7 +6,7 @@ import logging
 from collections.abc import Sequence
 from pathlib import Path
 
-from wavestack.bench.paper_views import PaperViews
+from wavestack.figures.paper_views import PaperViews
 from wavestack.figures.drawing import save_figure
 from wavestack.figures.paper_maps import beltrami_figure, error_figure, mesh_figure
 from wavestack.figures.paper_stats import ecdf_figure, gram_figure

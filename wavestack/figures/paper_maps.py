@@ -23,7 +23,7 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from wavestack.bench.paper_views import PaperViews
+from wavestack.figures.paper_views import PaperViews
 from wavestack.figures.drawing import BAR_COLOUR, MAGNITUDE_CMAP, SIGNED_CMAP, aperture_outline, map_panel
 from wavestack.figures.drawing import mesh_panel, new_figure, symmetric_limits
 

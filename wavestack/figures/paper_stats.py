@@ -15,7 +15,7 @@ from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from wavestack.bench.paper_views import PaperViews
+from wavestack.figures.paper_views import PaperViews
 from wavestack.figures.drawing import MAGNITUDE_CMAP, new_figure
 
 __all__ = ["GRAM_FLOOR", "ecdf", "ecdf_figure", "gram_figure", "gram_norm"]

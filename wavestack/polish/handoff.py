@@ -32,7 +32,7 @@ from pathlib import Path
 
 from wavestack.drivers.errors import DeviceError
 from wavestack.drivers.plc import JobFile, JobReceipt, PolishingLink, write_job_file
-from wavestack.station.results import Heartbeat
+from wavestack.station import Heartbeat
 
 logger = logging.getLogger(__name__)
 

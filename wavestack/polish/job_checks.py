@@ -71,7 +71,8 @@ def check_job(rules: JobRules, *, dwell_s: NDArray[np.floating], removal_nm: NDA
     Example
     -------
     >>> mask = np.ones((4, 4), bool)
-    >>> from wavestack.polish.measurement import MapSample, average_surface
+    >>> from wavestack.polish.measurement import average_surface
+    >>> from wavestack.station import MapSample
     >>> m = average_surface([MapSample(np.zeros((4, 4)), True, None, 0, 0)] * 2, wavelength_nm=600.0,
     ...                     reflection_factor=2.0, min_count=2)
     >>> check_job(JobRules(10.0, 100.0, 5.0), dwell_s=np.ones((4, 4)), removal_nm=np.ones((4, 4)),

@@ -1,13 +1,15 @@
 """The closed loop: measure -> check -> solve -> program -> hand off -> wait -> measure, until it stops.
 
-:class:`PolishingLoop` drives :mod:`~wavestack.polish.state`'s machine: each phase does its one
-piece of work and turns what happened into an event; :func:`~wavestack.polish.state.advance`
-decides where to go. The pieces: the measurement (:class:`~wavestack.polish.live_maps.LiveMaps`
-fed by the station's thread, averaged by :func:`~wavestack.polish.measurement.average_surface`),
-the plan (:func:`~wavestack.polish.planning.plan_job`), the job-level rules
+:class:`PolishingLoop` drives :mod:`~wavestack.polish.state`'s machine with the loop kernel's runner
+(:func:`~wavestack.loop.run_machine`): each phase does its one piece of work and turns what
+happened into an event; :func:`~wavestack.polish.state.advance` decides where to go. The pieces:
+the measurement (the station service's :class:`~wavestack.station.LiveMaps`, averaged by
+:func:`~wavestack.polish.measurement.average_surface`), the plan
+(:func:`~wavestack.polish.planning.plan_job`), the job-level rules
 (:func:`~wavestack.polish.job_checks.check_job`), the hand-off and the wait
 (:mod:`~wavestack.polish.handoff`). Every transition is recorded with its reason; a run's row is
-written when its job starts and completed when the next measurement (or the end) comes.
+written when its job starts and completed when the next measurement (or the end) comes; each
+completed run goes to ``on_run`` (its row) and ``on_run_maps`` (its row and maps, for figures).
 
 After a job the machine ended early (an e-stop, a watchdog trip, a fault) the loop still takes one
 more measurement if the station can give one: it is recorded as that run's result (what the part
@@ -29,16 +31,16 @@ from numpy.typing import NDArray
 from wavestack.config.polishing import PolishingConfig
 from wavestack.drivers.errors import DeviceError
 from wavestack.drivers.plc import PolishingLink
+from wavestack.loop import Transitions, run_machine
 from wavestack.pipeline.polishing import ToolInfluence
 from wavestack.polish.handoff import MachineEnd, announce_and_start, state_name, wait_for_done, write_job
 from wavestack.polish.job_checks import JobRules, JobUnsafe, check_job
-from wavestack.polish.live_maps import LiveMaps
-from wavestack.polish.measurement import ApertureKey, Measurement, UntrustedMeasurement, average_surface
+from wavestack.polish.measurement import ApertureKey, Measurement, average_surface
 from wavestack.polish.planning import NoFittingJob, PlannedJob, job_file_of, plan_job
-from wavestack.polish.plots import plot_run
 from wavestack.polish.recorder import CampaignRecorder
-from wavestack.polish.run_record import RunRecord, run_finished, run_started
+from wavestack.polish.run_record import RunMaps, RunRecord, run_finished, run_started
 from wavestack.polish.state import LoopEvent, LoopPhase, LoopState, advance, judge_job, judge_measurement
+from wavestack.station import LiveMaps, UntrustedMeasurement
 
 logger = logging.getLogger(__name__)
 
@@ -119,26 +121,27 @@ class PolishingLoop:
     stop : threading.Event
         The operator's stop.
     recorder : CampaignRecorder, optional
-    plots : Path, optional
-        A folder for one PNG per run.
     target_nm : ndarray (H, W), optional
         The target figure subtracted from every measurement.
     on_run : callable, optional
         Gets every completed :class:`RunRecord`.
+    on_run_maps : callable, optional
+        ``on_run_maps(row, maps)`` with the run's :class:`RunMaps` (the per-run figures).
     on_event : callable, optional
         ``on_event(phase, reason)`` for every transition.
     """
 
     def __init__(self, config: PolishingConfig, options: LoopOptions, *, link: PolishingLink, maps: LiveMaps,
                  tif: ToolInfluence, job_folder: Path, stop: threading.Event, recorder: CampaignRecorder | None = None,
-                 plots: Path | None = None, target_nm: NDArray[np.floating] | None = None,
-                 on_run: Callable[[RunRecord], None] | None = None,
+                 target_nm: NDArray[np.floating] | None = None, on_run: Callable[[RunRecord], None] | None = None,
+                 on_run_maps: Callable[[RunRecord, RunMaps], None] | None = None,
                  on_event: Callable[[str, str], None] | None = None) -> None:
         self._config, self._settings, self._options = config, config.polishing, options
         self._link, self._maps, self._tif = link, maps, tif
-        self._folder, self._stop, self._recorder, self._plots = Path(job_folder), stop, recorder, plots
+        self._folder, self._stop, self._recorder = Path(job_folder), stop, recorder
         self._target = target_nm
-        self._on_run, self._on_event = on_run, on_event
+        self._on_run, self._on_run_maps = on_run, on_run_maps
+        self._note = Transitions("polish", recorder=recorder, on_event=on_event)
         station = config.station
         assert station.plc is not None  # parse_polishing_config requires [plc]
         self._io_timeout_s = station.plc.link.io_timeout_s * 4
@@ -151,31 +154,13 @@ class PolishingLoop:
     def run(self) -> CampaignSummary:
         """Run the campaign to a terminal phase; returns how it ended (never raises a device error)."""
         c = _Campaign()
-        self._note(c.state)
         steps = {LoopPhase.MEASURING: self._measure, LoopPhase.CHECKING: self._check, LoopPhase.SOLVING: self._solve,
                  LoopPhase.PROGRAMMING: self._program, LoopPhase.HANDING_OFF: self._hand_off,
                  LoopPhase.POLISHING: self._wait}
-        while not c.state.terminal:
-            if self._stop.is_set():
-                self._go(c, LoopEvent.STOP, "stopped by the operator")
-                break
-            event, reason = steps[c.state.phase](c)
-            self._go(c, event, reason)
+        run_machine(c, steps, advance=advance, stop=self._stop, stop_event=LoopEvent.STOP, note=self._note)
         if c.run is not None:  # a run the loop did not see measured after
             self._finish_run(c, None)
         return CampaignSummary(c.state, tuple(c.runs), tuple(c.rms_nm))
-
-    def _go(self, c: _Campaign, event: LoopEvent, reason: str) -> None:
-        c.state = advance(c.state, event, reason)
-        self._note(c.state)
-
-    def _note(self, state: LoopState) -> None:
-        reason = state.reason or ""
-        logger.info("polish: %s (%s)", state.phase.value, reason)
-        if self._recorder is not None:
-            self._recorder.event(state.phase.value, reason)
-        if self._on_event is not None:
-            self._on_event(state.phase.value, reason)
 
     # ------------------------------------------------------------------ phases
     def _take_measurement(self, c: _Campaign) -> Measurement:
@@ -321,10 +306,8 @@ class PolishingLoop:
         c.runs.append(row)
         if self._recorder is not None and run.index is not None:
             self._recorder.run_updated(run.index, row, after.surface_nm if after else None)
-        if self._plots is not None:
-            plot_run(self._plots, row, measured_nm=run.before.surface_nm, dwell_s=run.job.dwell_s,
-                     predicted_residual_nm=run.job.residual_nm,
-                     measured_residual_nm=after.surface_nm if after else None, pixel_mm=self._settings.pixel_mm,
-                     step_px=self._settings.machine.step_px)
         if self._on_run is not None:
             self._on_run(row)
+        if self._on_run_maps is not None:
+            self._on_run_maps(row, RunMaps(run.before.surface_nm, run.job.dwell_s, run.job.residual_nm,
+                                           after.surface_nm if after else None))

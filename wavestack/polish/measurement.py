@@ -30,12 +30,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from wavestack.station.live_maps import MapSample, UntrustedMeasurement
+
 __all__ = ["ApertureKey", "MapSample", "Measurement", "UntrustedMeasurement", "average_surface", "remove_ptt",
            "surface_stats"]
-
-
-class UntrustedMeasurement(ValueError):
-    """A measurement the loop must not send a job on; the message says why."""
 
 
 @dataclass(frozen=True)
@@ -72,30 +70,6 @@ class ApertureKey:
     def to_json(self) -> dict[str, object]:
         """Plain JSON (the job file's ``aperture``)."""
         return {"shape": list(self.shape), "pixels": self.pixels, "mask_sha256_16": self.digest}
-
-
-@dataclass(frozen=True, eq=False)
-class MapSample:
-    """One live result as the measurement sees it.
-
-    Attributes
-    ----------
-    waves : ndarray (H, W) or None
-        The unwrapped wavefront, waves, NaN outside the aperture (None: the result had none).
-    valid : bool
-    reason : str or None
-        Why the result is invalid.
-    aperture_id : int or None
-        The station's aperture id of the result.
-    exposure_time_ns : int
-        Host time of the set's first frame (``time.time_ns``).
-    """
-
-    waves: NDArray[np.floating] | None
-    valid: bool
-    reason: str | None
-    aperture_id: int | None
-    exposure_time_ns: int
 
 
 @dataclass(frozen=True, eq=False)

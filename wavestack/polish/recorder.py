@@ -1,68 +1,47 @@
-"""The campaign record: everything the loop measured and sent, in one HDF5 file, flushed as it goes.
+"""The campaign record: everything the polishing loop measured and sent, on the loop kernel's checksummed record.
 
-Layout (format ``wavestack-polish-campaign``, version 1)::
+Format ``wavestack-polish-campaign`` (the kernel's :mod:`~wavestack.loop.record`, version 2: a
+CRC-32 per record, flushed per record, an existing file never overwritten). Header: the grid
+(``shape``) and the command's attributes (pixel_mm, wavelength_nm, reflection_factor, solver,
+target). Records, in the order they happened:
 
-    /                      attrs: format, format_version, created_utc, config_toml, pixel_mm,
-                           wavelength_nm, reflection_factor; at the end final_phase, final_reason,
-                           runs_done
-    /aperture_mask         (H, W) bool: the campaign's aperture (the first trusted measurement's)
-    /measurements/surface_nm   (n, H, W) float32, NaN outside the aperture: every trusted measurement
-    /measurements/{rms_nm, pv_nm, noise_rms_nm, count, exposure_unix_s}   (n,)
-    /runs/<field>          (r,) one column per :class:`~wavestack.polish.run_record.RunRecord` field
-    /runs/measured_nm, dwell_s, predicted_residual_nm, measured_residual_nm   (r, H, W) float32
-    /runs/job_file         (r,) the job file's bytes as written (vlen uint8)
-    /events/{unix_s, text} (e,) every transition of the loop, with its reason
+- ``event``: every transition of the loop with its reason;
+- ``map`` (the kernel's :data:`~wavestack.loop.MAP_KIND`): every trusted measurement, the surface
+  in nm (NaN outside the aperture; the first also holds the campaign's ``aperture_mask``), its RMS,
+  PV, noise, count and exposure time, and its ``measurement`` index;
+- ``run``: a run as it is handed off (its row, with NaN where the result is not known yet; the
+  measured surface it was computed from, the dwell map, the predicted residual, the job file's
+  bytes), and again when it is completed (the full row, and the measured residual when measured):
+  the later record of the same ``run_index`` supersedes the earlier;
+- ``end``: how the campaign ended.
 
-Every append and every update is followed by a flush, so a fault (a device, the machine, the
-operator's Ctrl-C) loses nothing already measured or sent: a run is written when its job is handed
-off (with NaN where its result is not known yet) and updated in place when it is. Maps are float32
-(a surface of 100 nm keeps ~1e-5 nm), chunked one map per chunk, gzip level 1 with shuffle and
-fletcher32 checksums. Not SWMR: the file grows new datasets and attributes as the campaign goes,
-which SWMR forbids; a process killed between two flushes may leave the last write unreadable.
+A fault (a device, the machine, the operator's Ctrl-C) loses nothing already measured or sent.
+:func:`read_polish_campaign` reads back every intact record, the damaged ones named.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import time
-from datetime import datetime, timezone
+import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 from numpy.typing import NDArray
 
+from wavestack.loop import MAP_KIND, CampaignWriter, read_campaign
 from wavestack.polish.measurement import Measurement
 from wavestack.polish.run_record import RunRecord
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "CampaignRecorder"]
+__all__ = ["FORMAT_NAME", "CampaignRecorder", "PolishCampaign", "RecordedMeasurement", "read_polish_campaign"]
 
 FORMAT_NAME = "wavestack-polish-campaign"
-FORMAT_VERSION = 1
-_RUN_MAPS = ("measured_nm", "dwell_s", "predicted_residual_nm", "measured_residual_nm")
-_MEASUREMENT_COLUMNS = {"rms_nm": np.float64, "pv_nm": np.float64, "noise_rms_nm": np.float64, "count": np.int64,
-                        "exposure_unix_s": np.float64}
+_RUN_MAPS = ("measured_nm", "dwell_s", "predicted_residual_nm")
 
 
-def _column_dtype(kind: Any) -> Any:
-    return {"int": np.int64, "float": np.float64, "str": h5py.string_dtype()}[kind if isinstance(kind, str)
-                                                                                else kind.__name__]
-
-
-def _growable(group: h5py.Group, name: str, row_shape: tuple[int, ...], dtype: Any) -> None:
-    extra: dict[str, Any] = {} if h5py.check_string_dtype(np.dtype(dtype)) else {"fletcher32": True}
-    if row_shape:
-        extra = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
-    group.create_dataset(name, shape=(0, *row_shape), maxshape=(None, *row_shape), chunks=(1 if row_shape else 64,
-                         *row_shape), dtype=dtype, **extra)
-
-
-def _append(dataset: h5py.Dataset, value: Any) -> int:
-    index = dataset.shape[0]
-    dataset.resize(index + 1, axis=0)
-    dataset[index] = value
-    return index
+def _row_fields(row: RunRecord) -> dict[str, Any]:
+    return dataclasses.asdict(row)
 
 
 class CampaignRecorder:
@@ -77,7 +56,7 @@ class CampaignRecorder:
     config_text : str
         The configuration the campaign ran with.
     attributes : dict
-        More root attributes (numbers and strings): pixel_mm, wavelength_nm, reflection_factor.
+        More header values (numbers and words): pixel_mm, wavelength_nm, reflection_factor, ...
 
     Example
     -------
@@ -86,104 +65,161 @@ class CampaignRecorder:
     ...     recorder = CampaignRecorder(Path(folder) / "c.h5", (4, 4), "", {})
     ...     recorder.event("measuring", "start")
     ...     recorder.close("target-met", "done", 0)
-    ...     h5py.File(Path(folder) / "c.h5", "r")["events/text"].shape
-    (1,)
+    ...     read_polish_campaign(Path(folder) / "c.h5").ending["final_phase"]
+    'target-met'
     """
 
     def __init__(self, path: Path, shape: tuple[int, int], config_text: str, attributes: dict[str, Any]) -> None:
-        self.path = Path(path)
         self._shape = (int(shape[0]), int(shape[1]))
-        self._file = h5py.File(self.path, "w-", libver="latest", locking=False)  # readable while it runs
-        self._closed = False
-        root = self._file
-        root.attrs["format"] = FORMAT_NAME
-        root.attrs["format_version"] = FORMAT_VERSION
-        root.attrs["created_utc"] = datetime.now(timezone.utc).isoformat()
-        root.attrs["config_toml"] = config_text
-        for key, value in attributes.items():
-            root.attrs[key] = value
-        measurements = root.create_group("measurements")
-        _growable(measurements, "surface_nm", self._shape, np.float32)
-        for name, dtype in _MEASUREMENT_COLUMNS.items():
-            _growable(measurements, name, (), dtype)
-        runs = root.create_group("runs", track_order=True)
-        for spec in dataclasses.fields(RunRecord):
-            _growable(runs, spec.name, (), _column_dtype(spec.type))
-        for name in _RUN_MAPS:
-            _growable(runs, name, self._shape, np.float32)
-        runs.create_dataset("job_file", shape=(0,), maxshape=(None,), chunks=(16,),
-                            dtype=h5py.vlen_dtype(np.uint8))
-        events = root.create_group("events")
-        _growable(events, "unix_s", (), np.float64)
-        _growable(events, "text", (), h5py.string_dtype())
-        self._file.flush()
+        header = {"shape": list(self._shape), **{k: v for k, v in attributes.items() if k != "software_version"}}
+        self._writer = CampaignWriter(Path(path), FORMAT_NAME, config_text, header,
+                                      software_version=str(attributes.get("software_version", "")))
+        self._measurements = 0
+        self._runs = 0
+
+    @property
+    def path(self) -> Path:
+        return self._writer.path
 
     @property
     def runs(self) -> int:
-        """Runs written so far."""
-        return int(self._file["runs/run"].shape[0])
+        """Runs handed off so far."""
+        return self._runs
 
     def event(self, phase: str, text: str) -> None:
-        """Append one transition (the phase entered and why)."""
-        events = self._file["events"]
-        _append(events["unix_s"], time.time())
-        _append(events["text"], f"{phase}: {text}")
-        self._file.flush()
+        """One transition (the phase entered and why)."""
+        self._writer.event(phase, text)
 
     def measurement(self, measurement: Measurement) -> int:
-        """Append a trusted measurement (the first also sets ``/aperture_mask``); returns its index."""
+        """A trusted measurement (the first also holds the aperture mask); returns its index."""
         self._check_shape(measurement.surface_nm, "measurement")
-        if "aperture_mask" not in self._file:
-            self._file.create_dataset("aperture_mask", data=measurement.mask, compression="gzip", fletcher32=True)
-        group = self._file["measurements"]
-        index = _append(group["surface_nm"], measurement.surface_nm.astype(np.float32))
-        values = {"rms_nm": measurement.rms_nm, "pv_nm": measurement.pv_nm, "noise_rms_nm": measurement.noise_rms_nm,
-                  "count": measurement.count, "exposure_unix_s": measurement.newest_exposure_ns * 1e-9}
-        for name, value in values.items():
-            _append(group[name], value)
-        self._file.flush()
-        return index
+        fields = {"measurement": self._measurements, "rms_nm": measurement.rms_nm, "pv_nm": measurement.pv_nm,
+                  "noise_rms_nm": measurement.noise_rms_nm, "count": measurement.count}
+        self._writer.append_map(measurement.surface_nm, units="nm",
+                                exposure_unix_s=measurement.newest_exposure_ns * 1e-9,
+                                mask=measurement.mask if self._measurements == 0 else None, fields=fields)
+        self._measurements += 1
+        return self._measurements - 1
 
     def run_started(self, row: RunRecord, *, measured_nm: NDArray, dwell_s: NDArray, predicted_residual_nm: NDArray,
                     job_file: bytes) -> int:
-        """Append a run as it is handed off (its result NaN until :meth:`run_updated`); returns its index."""
-        maps = {"measured_nm": measured_nm, "dwell_s": dwell_s, "predicted_residual_nm": predicted_residual_nm,
-                "measured_residual_nm": np.full(self._shape, np.nan)}
-        runs = self._file["runs"]
-        index = runs["run"].shape[0]
-        for name, array in maps.items():
-            self._check_shape(array, name)
-            _append(runs[name], np.asarray(array, dtype=np.float32))
-        _append(runs["job_file"], np.frombuffer(job_file, dtype=np.uint8))
-        for spec in dataclasses.fields(RunRecord):
-            _append(runs[spec.name], getattr(row, spec.name))
-        self._file.flush()
+        """A run as it is handed off (its result NaN until :meth:`run_updated`); returns its index."""
+        maps = {"measured_nm": measured_nm, "dwell_s": dwell_s, "predicted_residual_nm": predicted_residual_nm}
+        for name, values in maps.items():
+            self._check_shape(values, name)
+        index = self._runs
+        self._writer.append("run", {"run_index": index, **_row_fields(row)}, {**maps, "job_file": job_file})
+        self._runs += 1
         return index
 
     def run_updated(self, index: int, row: RunRecord, measured_residual_nm: NDArray | None = None) -> None:
-        """Rewrite run ``index``'s row (and its measured residual, when measured)."""
-        runs = self._file["runs"]
-        if not 0 <= index < runs["run"].shape[0]:
-            raise IndexError(f"run index {index} not recorded (0..{runs['run'].shape[0] - 1})")
-        for spec in dataclasses.fields(RunRecord):
-            runs[spec.name][index] = getattr(row, spec.name)
+        """Run ``index`` completed: its full row (and its measured residual, when measured).
+
+        Raises
+        ------
+        IndexError
+            No run ``index`` was handed off.
+        """
+        if not 0 <= index < self._runs:
+            raise IndexError(f"run index {index} not recorded (0..{self._runs - 1})")
+        arrays = {}
         if measured_residual_nm is not None:
             self._check_shape(measured_residual_nm, "measured residual")
-            runs["measured_residual_nm"][index] = np.asarray(measured_residual_nm, dtype=np.float32)
-        self._file.flush()
+            arrays["measured_residual_nm"] = measured_residual_nm
+        self._writer.append("run", {"run_index": index, **_row_fields(row)}, arrays)
 
     def close(self, final_phase: str, final_reason: str, runs_done: int) -> None:
         """Write how the campaign ended and close the file; idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._file.attrs["final_phase"] = final_phase
-            self._file.attrs["final_reason"] = final_reason
-            self._file.attrs["runs_done"] = int(runs_done)
-        finally:
-            self._file.close()
+        self._writer.close({"final_phase": final_phase, "final_reason": final_reason, "runs_done": int(runs_done)})
 
     def _check_shape(self, array: NDArray, what: str) -> None:
         if np.shape(array) != self._shape:
             raise ValueError(f"{what}: expected a {self._shape} map, got {np.shape(array)}")
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedMeasurement:
+    """One trusted measurement as recorded: the surface (H, W) in nm, float32, NaN outside; its figures."""
+
+    surface_nm: NDArray[np.float32]
+    rms_nm: float
+    pv_nm: float
+    noise_rms_nm: float
+    count: int
+    exposure_unix_s: float
+
+
+@dataclass(frozen=True, eq=False)
+class PolishCampaign:
+    """A campaign record as read back: what is intact, and what is not.
+
+    Attributes
+    ----------
+    header : dict
+    config_text : str
+    aperture_mask : ndarray (H, W) of bool or None
+    measurements : tuple of RecordedMeasurement
+        Every intact measurement, in order.
+    runs : tuple of RunRecord
+        The latest intact row of every run, in run order.
+    run_maps : tuple of dict
+        Per run (same order), its intact maps by name (``measured_nm``, ``dwell_s``,
+        ``predicted_residual_nm``, ``measured_residual_nm``) and ``job_file`` (uint8).
+    events : tuple of (phase, reason)
+    ending : dict or None
+        ``final_phase``, ``final_reason``, ``runs_done`` (None: the campaign did not end cleanly).
+    damage : tuple of str
+    """
+
+    header: dict[str, Any]
+    config_text: str
+    aperture_mask: NDArray[np.bool_] | None
+    measurements: tuple[RecordedMeasurement, ...]
+    runs: tuple[RunRecord, ...]
+    run_maps: tuple[dict[str, NDArray[Any]], ...]
+    events: tuple[tuple[str, str], ...]
+    ending: dict[str, Any] | None
+    damage: tuple[str, ...]
+
+
+def _number(value: Any) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _measurement(arrays: dict[str, NDArray[Any]], fields: dict[str, Any]) -> RecordedMeasurement:
+    return RecordedMeasurement(arrays["map"], _number(fields.get("rms_nm")), _number(fields.get("pv_nm")),
+                               _number(fields.get("noise_rms_nm")), int(fields.get("count") or 0),
+                               _number(fields.get("exposure_unix_s")))
+
+
+def _row(fields: dict[str, Any]) -> RunRecord:
+    values = {}
+    for spec in dataclasses.fields(RunRecord):
+        value = fields.get(spec.name)
+        values[spec.name] = math.nan if value is None and spec.type in ("float", float) else value
+    return RunRecord(**values)
+
+
+def read_polish_campaign(path: Path) -> PolishCampaign:
+    """Read a polishing campaign's record: every intact record, the damaged ones named.
+
+    Raises
+    ------
+    InputError
+        Not a polishing campaign record, or unreadable as a whole.
+    """
+    log = read_campaign(Path(path), FORMAT_NAME)
+    maps = log.of_kind(MAP_KIND)
+    mask = next((np.asarray(m.arrays["aperture_mask"], dtype=bool) for m in maps if "aperture_mask" in m.arrays), None)
+    runs: dict[int, RunRecord] = {}
+    run_maps: dict[int, dict[str, NDArray[Any]]] = {}
+    for entry in log.of_kind("run"):
+        index = int(entry.fields["run_index"])
+        runs[index] = _row(dict(entry.fields))
+        run_maps.setdefault(index, {}).update(entry.arrays)
+    endings = log.of_kind("end")
+    return PolishCampaign(dict(log.header), log.config_text, mask,
+                          tuple(_measurement(dict(m.arrays), dict(m.fields)) for m in maps),
+                          tuple(runs[k] for k in sorted(runs)), tuple(run_maps[k] for k in sorted(runs)),
+                          tuple((str(e.fields["phase"]), str(e.fields["reason"])) for e in log.of_kind("event")),
+                          dict(endings[-1].fields) if endings else None, log.damage)

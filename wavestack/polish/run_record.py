@@ -4,7 +4,7 @@ A run's row is made when its job is handed off (:func:`run_started`: before, pre
 and completed when the next measurement comes in or the loop stops (:func:`run_finished`); the
 recording writes it at both moments, so a run interrupted while the machine polishes is on disk
 with everything but its result. :meth:`RunRecord.to_json` is the ``--json`` line;
-:func:`run_line` the terminal's.
+:func:`run_line` the terminal's; :class:`RunMaps` the run's maps, as its figure draws them.
 """
 
 from __future__ import annotations
@@ -12,7 +12,10 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, replace
 
-__all__ = ["RunRecord", "run_finished", "run_line", "run_started"]
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["RunMaps", "RunRecord", "run_finished", "run_line", "run_started"]
 
 _NAN = float("nan")
 
@@ -83,6 +86,28 @@ class RunRecord:
         """``{"type": "run", ...}`` with every field (NaN as null)."""
         return {"type": "run", **{k: (None if isinstance(v, float) and not math.isfinite(v) else v)
                                   for k, v in asdict(self).items()}}
+
+
+@dataclass(frozen=True, eq=False)
+class RunMaps:
+    """The maps of one run (H, W), NaN outside the aperture.
+
+    Attributes
+    ----------
+    measured_nm : ndarray
+        The surface the job was computed from, nm.
+    dwell_s : ndarray
+        The dwell map (0 outside the dwell grid), s per point.
+    predicted_residual_nm : ndarray
+        What the solver predicts the job leaves, nm.
+    measured_residual_nm : ndarray or None
+        The measurement after the job (None: not measured).
+    """
+
+    measured_nm: NDArray[np.floating]
+    dwell_s: NDArray[np.floating]
+    predicted_residual_nm: NDArray[np.floating]
+    measured_residual_nm: NDArray[np.floating] | None
 
 
 def run_started(run: int, job_id: int, *, rms_before_nm: float, pv_before_nm: float, noise_before_nm: float,

@@ -1,19 +1,18 @@
-"""A polishing session: the station's devices opened, the station running on its own thread, the maps flowing.
+"""A polishing session: the station service running, the job folder, the host's tool model and target figure.
 
 :func:`open_session` does what ``wavestack polish`` and the end-to-end tests both need before a
 campaign: the job folder (``[plc] job_folder``, or a temporary folder for a simulated PLC), the
-devices (with ``sim://`` URLs the simulated bench, and a simulated PLC whose polishing machine
-polishes the optic's surface), the job ids the share already holds noted as used, the host's TIF
-and target figure, and the station's thread feeding a :class:`~wavestack.polish.live_maps.LiveMaps`.
-Everything is closed by the caller's ``ExitStack``: the station's thread first, then the station,
-then the devices.
+station service (:class:`~wavestack.station.StationService`: the devices, with ``sim://`` URLs the
+simulated bench and a simulated PLC whose polishing machine polishes the optic's surface; the
+station on its own thread feeding its averaged maps), the job ids the share already holds noted
+as used, and the host's TIF and target figure. Everything is closed by the caller's ``ExitStack``:
+the station's thread first, then the station, then the devices.
 """
 
 from __future__ import annotations
 
 import logging
 import tempfile
-import threading
 from collections.abc import Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -26,9 +25,8 @@ from wavestack.config.polishing import PolishingConfig
 from wavestack.drivers.plc import PolishingLink, used_job_ids
 from wavestack.pipeline import InputError
 from wavestack.pipeline.polishing import ToolInfluence
-from wavestack.polish.live_maps import LiveMaps
 from wavestack.polish.planning import host_tif
-from wavestack.station import CycleRecord, ResultSink, Station, StationDevices, open_station_devices
+from wavestack.station import LiveMaps, ResultSink, Station, StationDevices, StationService
 
 logger = logging.getLogger(__name__)
 
@@ -113,38 +111,6 @@ def _job_folder(config: PolishingConfig, stack: ExitStack) -> Path:
     return Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="wavestack-jobs-")))
 
 
-def _serve(stack: ExitStack, station: Station, maps: LiveMaps, sinks: Sequence[ResultSink] = ()) -> None:
-    """The station on its own thread until the stack closes (its heartbeat keeps the PLC's watchdog fed).
-
-    ``sinks`` get every record after ``maps`` (the web view).
-    """
-    halt = threading.Event()
-
-    def on_result(record: CycleRecord) -> None:
-        maps(record)
-        for sink in sinks:
-            sink(record)
-
-    def serve() -> None:
-        why = "stopped"
-        try:
-            station.run(stop=halt, on_result=on_result if sinks else maps)
-        except Exception as error:  # the loop sees it as an untrusted measurement or a lost machine
-            logger.error("the station stopped: %s", error, exc_info=True)
-            why = f"{type(error).__name__}: {error}"
-        finally:
-            maps.end(why)
-
-    thread = threading.Thread(target=serve, name="polish-station")
-    thread.start()
-
-    def stop_serving() -> None:
-        halt.set()
-        thread.join()
-
-    stack.callback(stop_serving)
-
-
 def open_session(config: PolishingConfig, stack: ExitStack, *, sinks: Sequence[ResultSink] = ()) -> PolishingSession:
     """Open everything a campaign needs (module notes); ``stack`` closes it all.
 
@@ -160,12 +126,10 @@ def open_session(config: PolishingConfig, stack: ExitStack, *, sinks: Sequence[R
     tif = session_tif(config)
     target = load_target_figure(config)
     job_folder = _job_folder(config, stack)
-    devices = open_station_devices(config.station, stack, job_folder=job_folder)
-    if devices.link is None:
+    if config.station.plc is None or not config.station.outputs.enabled:
         raise InputError(f"{config.source}: the polishing loop needs the PLC link ([plc], [outputs] enabled = true)")
-    devices.link.note_used_job_ids(used_job_ids(job_folder))  # never an id a file in the share already has
-    station = Station(config.station, devices)
-    stack.callback(station.close)
-    maps = LiveMaps()
-    _serve(stack, station, maps, sinks)
-    return PolishingSession(config, devices, devices.link, station, maps, job_folder, tif, target)
+    service = StationService(config.station, stack, sinks=sinks, job_folder=job_folder, name="polish-station")
+    link = service.devices.link
+    assert link is not None  # [plc] with outputs enabled opens the link
+    link.note_used_job_ids(used_job_ids(job_folder))  # never an id a file in the share already has
+    return PolishingSession(config, service.devices, link, service.station, service.maps, job_folder, tif, target)

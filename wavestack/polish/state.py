@@ -21,7 +21,10 @@ import enum
 from dataclasses import dataclass, replace
 from typing import Final
 
-__all__ = ["LoopEvent", "LoopPhase", "LoopState", "TERMINAL_PHASES", "TRANSITIONS", "advance", "judge_job", "judge_measurement"]
+from wavestack.loop import StateTable
+
+__all__ = ["LoopEvent", "LoopPhase", "LoopState", "TABLE", "TERMINAL_PHASES", "TRANSITIONS", "advance", "judge_job",
+           "judge_measurement"]
 
 
 class LoopPhase(enum.Enum):
@@ -65,9 +68,9 @@ TERMINAL_PHASES: Final = frozenset({LoopPhase.TARGET_MET, LoopPhase.MAX_RUNS, Lo
                                     LoopPhase.FLOOR_REACHED, LoopPhase.FAULTED, LoopPhase.INTERRUPTED})
 
 _P, _E = LoopPhase, LoopEvent
-#: (phase, event) -> next phase, for every expected event of every working phase. FAULT and STOP
-#: are expected everywhere; anything else not listed faults (module notes).
-TRANSITIONS: Final[dict[tuple[LoopPhase, LoopEvent], LoopPhase]] = {
+#: The loop's machine: (phase, event) -> next phase for every expected event of every working
+#: phase; FAULT and STOP are expected everywhere, anything else not listed faults (module notes).
+TABLE: Final = StateTable.build({
     (_P.MEASURING, _E.MEASURED): _P.CHECKING,
     (_P.MEASURING, _E.UNTRUSTED): _P.FAULTED,
     (_P.CHECKING, _E.AT_TARGET): _P.TARGET_MET,
@@ -80,9 +83,8 @@ TRANSITIONS: Final[dict[tuple[LoopPhase, LoopEvent], LoopPhase]] = {
     (_P.PROGRAMMING, _E.PROGRAMMED): _P.HANDING_OFF,
     (_P.HANDING_OFF, _E.HANDED_OFF): _P.POLISHING,
     (_P.POLISHING, _E.MACHINE_DONE): _P.MEASURING,
-    **{(phase, _E.FAULT): _P.FAULTED for phase in _P if phase not in TERMINAL_PHASES},
-    **{(phase, _E.STOP): _P.INTERRUPTED for phase in _P if phase not in TERMINAL_PHASES},
-}
+}, phases=_P, terminal=TERMINAL_PHASES, faulted=_P.FAULTED, interrupted=_P.INTERRUPTED, fault=_E.FAULT, stop=_E.STOP)
+TRANSITIONS: Final = TABLE.transitions
 
 
 @dataclass(frozen=True)
@@ -135,16 +137,10 @@ def advance(state: LoopState, event: LoopEvent, reason: str | None = None) -> Lo
     >>> advance(LoopState(LoopPhase.POLISHING), LoopEvent.MACHINE_DONE).runs_done
     1
     """
-    if state.terminal:
-        return state
-    following = TRANSITIONS.get((state.phase, event))
-    if following is None:
-        return replace(state, phase=LoopPhase.FAULTED,
-                       reason=f"unexpected event {event.value!r} while {state.phase.value}"
-                              + (f" ({reason})" if reason else ""))
-    runs = state.runs_done + (event is LoopEvent.MACHINE_DONE)
-    kept = reason if reason is not None else (state.reason if following in TERMINAL_PHASES else None)
-    return LoopState(following, runs, kept)
+    step = TABLE.step(state.phase, event, reason, state.reason)
+    if not step.expected:
+        return replace(state, phase=step.phase, reason=step.reason)
+    return LoopState(step.phase, state.runs_done + (event is LoopEvent.MACHINE_DONE), step.reason)
 
 
 def judge_measurement(rms_nm: float, previous_rms_nm: float | None, runs_done: int, *, target_rms_nm: float,

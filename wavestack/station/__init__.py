@@ -1,9 +1,14 @@
-"""The live station: sources, devices, the two processors, the one-way result loop, outputs, live view.
+"""The live station and the service the loops stand on: sources, devices, the result loop, outputs, sinks.
 
 A cycle runs one way, one value per arrow: frames -> a processor's frozen outcome
 (:class:`InterferometerOutcome` or :class:`SlopeOutcome`) -> :func:`make_result` (pure) -> the
-output stage (safety stage, PLC), which returns an :class:`OutputRecord` -> one
-:class:`CycleRecord` for every sink.
+output stage (the PLC), which returns an :class:`OutputRecord` -> one :class:`CycleRecord` for
+every sink.
+
+The service the applications (``polish``, ``align``, ``batch``) use: :class:`StationService`
+(the station on its own thread, its records to every sink), its averaged maps
+(:class:`LiveMaps`: N valid maps in a row, or :class:`UntrustedMeasurement`), the PLC's status
+(:class:`Heartbeat`), the result values and the processors.
 """
 
 from __future__ import annotations
@@ -21,13 +26,14 @@ from wavestack.station.cycle import CycleRecord, ProcessorOutcome, ResultSink, m
 from wavestack.station.devices import StationDevices, configure_camera, open_station_devices, phase_steps_rad
 from wavestack.station.fitter_cache import FALLBACK_METHOD, FitterCache, FitterChoice
 from wavestack.station.interferometer import CARRIER_REFRESH_SETS, InterferometerOutcome, PreparedSet, SetProcessor
+from wavestack.station.live_maps import LiveMaps, MapSample, UntrustedMeasurement, sample_of
 from wavestack.station.live_view import LiveSnapshot, LiveStats, counter_lines, render_live_view
 from wavestack.station.outputs import PlcOutput, start_up_hold
+from wavestack.station.plc_status import Heartbeat
 from wavestack.station.results import (
     ApertureRecord,
     FitDiagnostics,
     FitterDiagnostics,
-    Heartbeat,
     OutputRecord,
     ReconstructorDiagnostics,
     SentCommand,
@@ -45,6 +51,7 @@ from wavestack.station.shack_hartmann import (
     pupil_lenslets,
 )
 from wavestack.station.sources import CarrierSource, PhaseStepSource
+from wavestack.station.service import StationService
 from wavestack.station.station import Station, StationSummary, build_processor
 from wavestack.station.truth import TruthCheck
 
@@ -52,10 +59,10 @@ __all__ = [
     "ApertureAction", "ApertureEvent", "AperturePhase", "ApertureRecord", "ApertureState", "CARRIER_REFRESH_SETS",
     "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
     "FitterChoice", "FitterDiagnostics", "FrameCounts", "GROUP_SETS", "Heartbeat", "InterferometerOutcome", "LensletSlopes",
-    "LiveSnapshot", "LiveStats", "MODAL", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet", "ProcessorOutcome",
+    "LiveMaps", "LiveSnapshot", "LiveStats", "MODAL", "MapSample", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet", "ProcessorOutcome",
     "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetBatch", "SetCounts", "SetProcessor",
-    "SlopeOutcome", "SlopeProcessor", "Station", "StationDevices", "StationResult", "StationSummary", "TruthCheck",
-    "TruthErrors", "build_processor", "coefficient_errors", "configure_camera", "confirm", "counter_lines",
-    "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view",
+    "SlopeOutcome", "SlopeProcessor", "Station", "StationDevices", "StationResult", "StationService",
+    "StationSummary", "TruthCheck", "TruthErrors", "UntrustedMeasurement", "build_processor", "coefficient_errors", "configure_camera", "confirm", "counter_lines",
+    "json_ready", "make_result", "sample_of", "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view",
     "start_up_hold", "with_output",
 ]

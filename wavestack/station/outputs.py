@@ -44,7 +44,8 @@ from wavestack.drivers.plc import CommandLimits, HeartbeatEchoStale, PlcRefused,
 from wavestack.drivers.safety import SafeOutput, SafetyLimits, SafetyStage
 from wavestack.pipeline import wavefront_to_surface, waves_to_nm
 from wavestack.station.output_state import OutputAction, OutputMode, OutputState, PlcEvent, hold_reason, transition
-from wavestack.station.results import Heartbeat, OutputRecord, SentCommand, StationResult
+from wavestack.station.plc_status import Heartbeat
+from wavestack.station.results import OutputRecord, SentCommand, StationResult
 
 logger = logging.getLogger(__name__)
 

@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Union
 
 from wavestack.station.counters import Counters
+from wavestack.station.plc_status import Heartbeat
 
 
 @dataclass(frozen=True)
@@ -76,44 +77,6 @@ class ReconstructorDiagnostics:
 
 
 FitterDiagnostics = Union[FitDiagnostics, ReconstructorDiagnostics]
-
-
-@dataclass(frozen=True)
-class Heartbeat:
-    """One PLC heartbeat: the PLC's status, or the error that stopped the exchange.
-
-    Attributes
-    ----------
-    ok : bool
-        The heartbeat was written and the status read with a fresh echo.
-    watchdog_tripped, ready, estop : bool or None
-        From the status (``watchdog_tripped`` also when the heartbeat was refused by a trip).
-    error : str or None
-        Why the exchange failed.
-    state : str or None
-        The output's mode after this heartbeat (:class:`~wavestack.station.output_state.OutputMode`
-        name, e.g. ``"ARMED"``, ``"TRIPPED"``), JSON key ``plc_state``.
-    """
-
-    ok: bool
-    watchdog_tripped: bool | None = None
-    ready: bool | None = None
-    estop: bool | None = None
-    error: str | None = None
-    state: str | None = None
-
-    def to_json(self) -> dict[str, object]:
-        record: dict[str, object]
-        if not self.ok:
-            record = {"heartbeat": False, "error": self.error}
-            if self.watchdog_tripped:
-                record["watchdog_tripped"] = True
-        else:
-            record = {"heartbeat": True, "watchdog_tripped": self.watchdog_tripped, "ready": self.ready,
-                      "estop": self.estop}
-        if self.state is not None:
-            record["plc_state"] = self.state
-        return record
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,8 @@
-"""The web view's feed: the station's sink and the loops' callbacks write; the server's tick reads.
+"""The web view's feed: the station's sink and the loops' values write; the server's tick reads.
 
-Writers (the station's pipeline thread, a loop's thread) only note what they got under a lock:
+Writers (the station's pipeline thread, a loop's thread) only note what they got under a lock
+(the web view reads values only: station records, a loop's phase and its
+:class:`~wavestack.loop.LoopHistory`; it drives nothing):
 a result goes into :class:`~wavestack.station.LiveStats` (the terminal view's numbers), a map is
 kept by reference (the station never mutates a record's map after making it). Nothing is rendered
 there, so the web view costs the pipeline a lock and a few additions per result.
@@ -22,20 +24,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.align.loop import IterationRecord
+from wavestack.loop import LoopHistory
 from wavestack.pipeline.zernike import first_index, index_to_nm, mode_name
-from wavestack.polish.run_record import RunRecord
 from wavestack.station.cycle import CycleRecord
 from wavestack.station.live_view import LiveSnapshot, LiveStats
 from wavestack.station.results import FitDiagnostics, StationResult
-from wavestack.web.history import (
-    ALIGN_COLUMNS,
-    POLISH_COLUMNS,
-    align_row,
-    align_trend,
-    polish_row,
-    polish_trend,
-)
 from wavestack.web.render import render_map
 from wavestack.web.view import Coefficient, HistoryPanel, LiveUpdate, MapImage, StationPanel
 
@@ -140,9 +133,7 @@ class LiveFeed:
         self._map: _PendingMap | None = None
         self._ended: str | None = None
         self._phase = ("", "")
-        self._history_kind = ""
-        self._runs: dict[int, RunRecord] = {}
-        self._iterations: dict[int, IterationRecord] = {}
+        self._history: LoopHistory | None = None
         self._history_seq = 0
         # the reader's own (update() runs on one thread)
         self._published = 0
@@ -181,19 +172,10 @@ class LiveFeed:
             self._history_seq += 1
             self._version += 1
 
-    def add_run(self, row: RunRecord) -> None:
-        """A polishing run's row (a later row of the same run replaces it)."""
+    def show_history(self, history: LoopHistory) -> None:
+        """A loop's history table as it stands now (it replaces the one shown)."""
         with self._lock:
-            self._history_kind = "polish"
-            self._runs[row.run] = row
-            self._history_seq += 1
-            self._version += 1
-
-    def add_iteration(self, record: IterationRecord) -> None:
-        """An alignment iteration."""
-        with self._lock:
-            self._history_kind = "align"
-            self._iterations[record.iteration] = record
+            self._history = history
             self._history_seq += 1
             self._version += 1
 
@@ -217,7 +199,7 @@ class LiveFeed:
             self._published = self._version
             snapshot = self._stats.snapshot() if self._records else None
             newest, shown, ended, phase = self._newest, self._shown, self._ended, self._phase
-            history = self._history()
+            history = self._history_panel()
         if render_due and pending is not None:
             self._image = render_map(pending.values, units=pending.units, title=pending.title, seq=pending.number,
                                      max_side=self._max_side)
@@ -231,16 +213,11 @@ class LiveFeed:
         return LiveUpdate(self._seq, self._title, state, detail, panel, self._image, history, renders=renders,
                           render_ms_mean=self._render_ms_total / renders if renders else math.nan)
 
-    def _history(self) -> HistoryPanel | None:
+    def _history_panel(self) -> HistoryPanel | None:
         phase, reason = self._phase
-        if self._history_kind == "polish":
-            runs = [self._runs[k] for k in sorted(self._runs)]
-            return HistoryPanel("polish", self._history_seq, POLISH_COLUMNS, tuple(polish_row(r) for r in runs),
-                                "surface RMS (nm)", polish_trend(runs), phase, reason)
-        if self._history_kind == "align":
-            records = [self._iterations[k] for k in sorted(self._iterations)]
-            return HistoryPanel("align", self._history_seq, ALIGN_COLUMNS, tuple(align_row(r) for r in records),
-                                "worst field RMS (waves)", align_trend(records), phase, reason)
+        h = self._history
+        if h is not None:
+            return HistoryPanel(h.kind, self._history_seq, h.columns, h.rows, h.trend_label, h.trend, phase, reason)
         if phase:
             return HistoryPanel("", self._history_seq, (), (), "", (), phase, reason)
         return None

@@ -15,11 +15,12 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from wavestack.loop import Cell
+
 __all__ = ["BrowserCounts", "Coefficient", "HistoryPanel", "LiveUpdate", "MapImage", "StationPanel",
            "update_message"]
 
 Polygon = tuple[tuple[float, float], ...]
-Cell = float | int | str | None
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""What ``bench paper`` keeps of each row for the seed paper's figures (``bench paper --plots``).
+"""What the seed paper's figures draw of each ``bench paper`` row (``bench paper --plots``): plain values.
 
 The benchmark builds, for every aperture and method, a fitter (with its canonical map for the
 mapped methods) and fits known truths; the figures need some of that beyond the table's numbers:

@@ -7,7 +7,7 @@ import pytest
 
 from wavestack.bench import PAPER_APERTURES
 from wavestack.bench.paper import benchmark_case
-from wavestack.bench.paper_views import basis_gram
+from wavestack.figures.paper_views import basis_gram
 from wavestack.pipeline import Aperture, build_fitter
 
 

@@ -1,13 +1,14 @@
-"""The station's results as the loop sees them: a sink that hands N fresh maps in a row to a waiting measurement.
+"""The station's maps as a loop sees them: a sink that hands N fresh maps in a row to a waiting measurement.
 
-The station runs in its own thread for the whole campaign (so the PLC heartbeat never pauses,
-whether the loop measures, solves or waits for the machine) and gives every
+The station runs on its own thread for the whole of a loop (so the PLC heartbeat never pauses,
+whether the loop measures, solves or waits for a machine) and gives every
 :class:`~wavestack.station.cycle.CycleRecord` to a :class:`LiveMaps`. The sink keeps only what
-is asked for: between measurements it notes the last heartbeat and drops the maps. A measurement
-(:meth:`LiveMaps.collect`) asks for ``count`` valid maps in a row exposed after a given time (the
-machine's done); an invalid result empties the window (the maps on either side of a glitch are not
-averaged together), and the measurement gives up, untrusted, after ``max_results`` results, at its
-deadline, or when the station stops.
+is asked for: between measurements it notes the last PLC status and drops the maps. A measurement
+(:meth:`LiveMaps.collect`, or :meth:`LiveMaps.average` for their mean) asks for ``count`` valid
+maps in a row exposed after a given time (a machine's done, a platform on target); an invalid
+result empties the window (the maps on either side of a glitch are not averaged together), and
+the measurement gives up, untrusted, after ``max_results`` results, at its deadline, or when the
+station stops.
 """
 
 from __future__ import annotations
@@ -16,11 +17,41 @@ import threading
 import time
 from dataclasses import dataclass
 
-from wavestack.polish.measurement import MapSample, UntrustedMeasurement
-from wavestack.station.cycle import CycleRecord
-from wavestack.station.results import Heartbeat
+import numpy as np
+from numpy.typing import NDArray
 
-__all__ = ["LiveMaps", "sample_of"]
+from wavestack.station.cycle import CycleRecord
+from wavestack.station.plc_status import Heartbeat
+
+__all__ = ["LiveMaps", "MapSample", "UntrustedMeasurement", "sample_of"]
+
+
+class UntrustedMeasurement(ValueError):
+    """A measurement a loop must not act on (no job, no move); the message says why."""
+
+
+@dataclass(frozen=True, eq=False)
+class MapSample:
+    """One live result as the measurement sees it.
+
+    Attributes
+    ----------
+    waves : ndarray (H, W) or None
+        The unwrapped wavefront, waves, NaN outside the aperture (None: the result had none).
+    valid : bool
+    reason : str or None
+        Why the result is invalid.
+    aperture_id : int or None
+        The station's aperture id of the result.
+    exposure_time_ns : int
+        Host time of the set's first frame (``time.time_ns``).
+    """
+
+    waves: NDArray[np.floating] | None
+    valid: bool
+    reason: str | None
+    aperture_id: int | None
+    exposure_time_ns: int
 
 
 def sample_of(record: CycleRecord) -> MapSample:
@@ -59,7 +90,7 @@ class LiveMaps:
 
     @property
     def last_heartbeat(self) -> Heartbeat | None:
-        """The PLC heartbeat of the station's latest result (None before any)."""
+        """The PLC status of the station's latest result (None before any)."""
         with self._condition:
             return self._heartbeat
 
@@ -127,3 +158,18 @@ class LiveMaps:
                 return list(request.window)
             finally:
                 self._request = None
+
+    def average(self, count: int, *, not_before_ns: int, timeout_s: float, stop: threading.Event,
+                max_results: int | None = None) -> NDArray[np.float64]:
+        """The mean of ``count`` valid maps in a row exposed at or after ``not_before_ns``, waves (H, W).
+
+        ``max_results`` defaults to ``4 * count``.
+
+        Raises
+        ------
+        UntrustedMeasurement
+            As :meth:`collect`.
+        """
+        samples = self.collect(count, max_results=4 * count if max_results is None else max_results,
+                               not_before_ns=not_before_ns, timeout_s=timeout_s, stop=stop)
+        return np.mean([np.asarray(s.waves, dtype=np.float64) for s in samples], axis=0)

@@ -9,11 +9,11 @@ import time
 import numpy as np
 import pytest
 
-from wavestack.polish.live_maps import LiveMaps, sample_of
-from wavestack.polish.measurement import UntrustedMeasurement
+from wavestack.station.live_maps import LiveMaps, UntrustedMeasurement, sample_of
 from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord
-from wavestack.station.results import ApertureRecord, Heartbeat, OutputRecord, SentCommand, StationResult
+from wavestack.station.plc_status import Heartbeat
+from wavestack.station.results import ApertureRecord, OutputRecord, SentCommand, StationResult
 
 
 def _record(index: int, t_ns: int, *, valid: bool = True, tripped: bool = False) -> CycleRecord:

@@ -1,11 +1,13 @@
-"""One PNG per run: the measured surface, the dwell map, the predicted and the measured residual.
+"""One PNG per polishing run: the measured surface, the dwell map, the predicted and the measured residual.
 
 People judge a surface by looking at it: the figures show each map on the measurement grid in mm
 (the machine frame of the contracts: x right, y up, origin at the grid centre), with a colour bar
 in nm (surfaces) or s/mm^2 (the dwell, as a density over one lattice cell) and a title giving its RMS and PV. The two residuals share one colour
 scale, so what the machine achieved reads directly against what the solver promised.
 matplotlib's Agg backend (no display) through the object API (``Figure``), so nothing global is set;
-the panels are drawn by :func:`wavestack.figures.map_panel`, like every wavestack figure.
+the panels are drawn by :func:`~wavestack.figures.drawing.map_panel`, like every wavestack figure.
+The figure reads the loop's values only (its :class:`~wavestack.polish.run_record.RunRecord` and
+:class:`~wavestack.polish.run_record.RunMaps`); ``wavestack polish --plots`` hands them over.
 """
 
 from __future__ import annotations
@@ -19,8 +21,8 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from wavestack.figures import SIGNED_CMAP, data_limits, map_panel, new_figure, save_figure
-from wavestack.polish.run_record import RunRecord
+from wavestack.figures.drawing import SIGNED_CMAP, data_limits, map_panel, new_figure, save_figure
+from wavestack.polish.run_record import RunMaps, RunRecord
 
 __all__ = ["plot_run", "run_plot_name"]
 
@@ -49,9 +51,7 @@ def _panel(figure: Figure, axes: Axes, data: NDArray, extent: tuple[float, float
               extent=extent, axis_labels=("x, mm", "y, mm"))
 
 
-def plot_run(folder: Path, row: RunRecord, *, measured_nm: NDArray, dwell_s: NDArray,
-             predicted_residual_nm: NDArray, measured_residual_nm: NDArray | None, pixel_mm: float,
-             step_px: int = 1) -> Path:
+def plot_run(folder: Path, row: RunRecord, maps: RunMaps, *, pixel_mm: float, step_px: int = 1) -> Path:
     """Write run ``row.run``'s figure into ``folder``; returns its path.
 
     Parameters
@@ -59,15 +59,16 @@ def plot_run(folder: Path, row: RunRecord, *, measured_nm: NDArray, dwell_s: NDA
     folder : Path
         An existing folder.
     row : RunRecord
-    measured_nm, dwell_s, predicted_residual_nm : ndarray (H, W)
-        NaN outside the aperture (the dwell map: 0 outside the dwell grid).
-    measured_residual_nm : ndarray (H, W) or None
-        The measurement after the job (None: not measured; the panel says so).
+    maps : RunMaps
+        NaN outside the aperture (the dwell map: 0 outside the dwell grid); a measured residual
+        of None is drawn as not measured.
     pixel_mm : float
     step_px : int
         The dwell points' spacing, pixels: the dwell is drawn as a density (s/mm^2) averaged over
         one lattice cell, not as isolated points.
     """
+    measured_nm, dwell_s, predicted_residual_nm = maps.measured_nm, maps.dwell_s, maps.predicted_residual_nm
+    measured_residual_nm = maps.measured_residual_nm
     rows, cols = np.shape(measured_nm)
     half_w, half_h = (cols - 1) / 2 * pixel_mm, (rows - 1) / 2 * pixel_mm
     extent = (-half_w, half_w, -half_h, half_h)
