@@ -12,13 +12,14 @@ import pytest
 from wavestack.cli import EXIT_BAD_INPUT, EXIT_DEVICE_ERROR, main
 from wavestack.config import load_plc_config
 from wavestack.drivers.plc import PolishingLink
+from wavestack.simulated import plc_layout, polishing_station
 from wavestack.simulators.plc import PlcSimulator, WatchdogState
 
 
 def _simulator(watchdog_timeout_s: float) -> PlcSimulator:
     config = load_plc_config(None)
-    layout = config.sim_layout()
-    return PlcSimulator(replace(layout, watchdog_timeout_s=watchdog_timeout_s), config.polishing_station())
+    layout = plc_layout(config)
+    return PlcSimulator(replace(layout, watchdog_timeout_s=watchdog_timeout_s), polishing_station(config))
 
 
 def _wait_for(condition, timeout_s: float = 10.0) -> bool:

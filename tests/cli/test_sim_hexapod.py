@@ -15,6 +15,7 @@ from sim_serving import serve_in_thread
 from wavestack.cli.sim_hexapod import run_hexapod_simulator
 from wavestack.config.hexapod_sim import load_hexapod_sim_config, parse_hexapod_sim_config
 from wavestack.config.schema import ConfigError
+from wavestack.simulated import hexapod_settings
 from wavestack.simulators.pi_gcs import HexapodSimSettings
 
 # What a config/hexapod-sim.toml would hold (the built-in hexapod, every key written out). It lives here
@@ -89,8 +90,8 @@ def test_a_bad_port_or_a_busy_one_is_bad_input() -> None:
 
 
 def test_the_example_file_equals_the_built_in_hexapod(example_file: Path) -> None:
-    assert load_hexapod_sim_config(example_file) == HexapodSimSettings()
-    assert load_hexapod_sim_config(None) == HexapodSimSettings()
+    assert hexapod_settings(load_hexapod_sim_config(example_file)) == HexapodSimSettings()
+    assert hexapod_settings(load_hexapod_sim_config(None)) == HexapodSimSettings()
 
 
 def test_a_field_stage_table_gives_two_axes_and_no_pivot() -> None:
@@ -109,7 +110,7 @@ def test_a_field_stage_table_gives_two_axes_and_no_pivot() -> None:
 ])
 def test_bad_simulator_tables_name_file_table_and_key(table: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message) as caught:
-        parse_hexapod_sim_config({"hexapod": {"simulator": table}}, source="lab.toml")
+        hexapod_settings(parse_hexapod_sim_config({"hexapod": {"simulator": table}}, source="lab.toml"), source="lab.toml")
     assert "lab.toml" in str(caught.value)
 
 

@@ -15,7 +15,8 @@ from sim_serving import serve_in_thread
 from wavestack.config.schema import ConfigError
 from wavestack.drivers.plc import PolishingLink, decode_float32, round_to_float32
 from wavestack.config.plc import load_plc_config
-from wavestack.cli.sim_plc import is_loopback, run_plc_simulator
+from wavestack.cli.bind import is_loopback
+from wavestack.cli.sim_plc import run_plc_simulator
 from wavestack.simulators.plc import HeartbeatWatchdog, SimFaults, WatchdogState
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"

@@ -32,10 +32,12 @@ from wavestack.config.pzt import PiezoSettings, PiezoSimulatorSettings
 from wavestack.config.schema import ConfigError
 from wavestack.config.shack_hartmann import ShackHartmannSettings
 from wavestack.config.station import OutputSettings, StationSettings, parse_station_config
-from wavestack.simulators.bench import PiezoCoupling
-from wavestack.simulators import SurfaceSettings
-from wavestack.simulators.optic import OpticSettings
-from wavestack.simulators.spots import LensletArraySettings
+from wavestack.config.simulated_bench import (
+    BenchSimulatorSettings,
+    LensletSimulatorSettings,
+    OpticSimulatorSettings,
+    SurfaceSimulatorSettings,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 BASES = [tomllib.loads(path.read_text(encoding="utf-8")) for path in (
@@ -44,8 +46,8 @@ SCHEMAS: dict[tuple[str, ...], type] = {
     ("station",): StationSettings, ("processing",): ProcessingSettings, ("camera",): CameraSettings,
     ("camera", "simulator"): CameraSimulatorSettings, ("pzt",): PiezoSettings, ("pzt", "simulator"): PiezoSimulatorSettings,
     ("plc",): PlcLinkSettings, ("plc", "simulator", "polishing"): PolishingModelSettings, ("outputs",): OutputSettings,
-    ("optic",): OpticSettings, ("bench",): PiezoCoupling, ("shack_hartmann",): ShackHartmannSettings,
-    ("lenslets",): LensletArraySettings, ("optic", "surface"): SurfaceSettings,
+    ("optic",): OpticSimulatorSettings, ("bench",): BenchSimulatorSettings, ("shack_hartmann",): ShackHartmannSettings,
+    ("lenslets",): LensletSimulatorSettings, ("optic", "surface"): SurfaceSimulatorSettings,
 }
 SOURCE = "fuzz.toml"
 

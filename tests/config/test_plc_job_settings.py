@@ -16,6 +16,7 @@ from wavestack.cli.sim_plc import run_plc_simulator
 from wavestack.config.plc import load_plc_config
 from wavestack.config.schema import ConfigError
 from wavestack.drivers.plc import JobFile, MachineState, PolishingLink, write_job_file
+from wavestack.simulated import machine_settings, plc_layout
 
 MINIMAL = '[plc]\nurl = "tcp://10.0.0.5:502"\n'
 
@@ -28,7 +29,7 @@ def write(tmp_path: Path, text: str) -> Path:
 
 def test_the_defaults_carry_the_job_blocks_and_limits() -> None:
     config = load_plc_config(None)
-    register_map, layout = config.link.register_map(), config.sim_layout()
+    register_map, layout = config.link.register_map(), plc_layout(config)
     assert register_map.job is not None and register_map.machine is not None
     assert (register_map.job.start, register_map.machine.start) == (layout.job_register, layout.machine_register)
     assert register_map.job.word_order == layout.job_order
@@ -38,12 +39,12 @@ def test_the_defaults_carry_the_job_blocks_and_limits() -> None:
 def test_the_machine_table_and_its_job_folder(tmp_path: Path) -> None:
     config = load_plc_config(write(tmp_path, MINIMAL + 'job_folder = "/host/jobs"\n[plc.simulator.polishing]\n'
                                    "[plc.simulator.machine]\ntime_scale = 50.0\nwidth_error = 0.1\n"))
-    settings = config.machine_settings()
+    settings = machine_settings(config)
     assert (settings.job_folder, settings.time_scale, settings.width_error) == (Path("/host/jobs"), 50.0, 0.1)
-    assert config.machine_settings(tmp_path).job_folder == tmp_path  # an explicit folder wins
+    assert machine_settings(config, tmp_path).job_folder == tmp_path  # an explicit folder wins
     bare = load_plc_config(write(tmp_path, MINIMAL + "[plc.simulator.polishing]\n"))
     with pytest.raises(ConfigError, match="needs a job folder"):
-        bare.machine_settings()
+        machine_settings(bare)
 
 
 @pytest.mark.parametrize(("text", "message"), [

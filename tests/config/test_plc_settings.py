@@ -6,8 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from wavestack.config.schema import ConfigError
 from wavestack.config.plc import PlcLinkSettings, load_plc_config
+from wavestack.config.schema import ConfigError
+from wavestack.simulated import plc_layout, polishing_station
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 
@@ -41,13 +42,13 @@ def test_driver_map_and_simulator_layout_come_from_the_same_values(tmp_path: Pat
     config = load_plc_config(write(tmp_path, MINIMAL + 'word_order = "BADC"\ncommand_word_order = "DCBA"\n'
                                    "command_block = [100, 8]\noutput_block = [200, 8]\n"
                                    "[plc.simulator.polishing]\ninitial_surface_nm = [1.0, 2.0, 3.0]\n"))
-    register_map, layout = config.link.register_map(), config.sim_layout()
+    register_map, layout = config.link.register_map(), plc_layout(config)
     assert (layout.command_block, layout.output_block) == ((100, 8), (200, 8))
     assert (register_map.command.start, register_map.command.count) == layout.command_block
     assert (register_map.command.word_order, layout.command_word_order) == ("DCBA", "DCBA")
     assert (register_map.output.word_order, layout.output_word_order) == ("BADC", "BADC")
     assert (register_map.self_check.word_order, layout.self_check_word_order) == ("BADC", "BADC")
-    assert config.polishing_station().n_terms == layout.n_terms == 3
+    assert polishing_station(config).n_terms == layout.n_terms == 3
     timing = config.link.link_timing()
     assert timing.io_timeout_s == PlcLinkSettings().io_timeout_s
 
@@ -56,7 +57,7 @@ def test_the_simulator_answers_the_function_codes_the_driver_is_configured_with(
     # A PLC configured for input registers (FC4) and single writes by FC16 must be simulated so: the
     # simulator refuses every function code its map does not list (exception 1).
     config = load_plc_config(write(tmp_path, MINIMAL + "read_function_code = 4\nsingle_write_function_code = 16\n"))
-    register_map, layout = config.link.register_map(), config.sim_layout()
+    register_map, layout = config.link.register_map(), plc_layout(config)
     assert layout.read_function == register_map.status.read_function == 4
     assert layout.single_write_function == register_map.heartbeat.write_function == 16
 

@@ -6,17 +6,17 @@ from pathlib import Path
 
 import pytest
 
-from wavestack.config.schema import ConfigError
+from wavestack.cli.sim_pzt import default_pzt_config
 from wavestack.config.pzt import (
     PiezoSettings,
     PiezoSimulatorSettings,
     build_calibration,
     build_piezo,
-    build_simulated_device,
     load_pzt_config,
     parse_pzt_config,
 )
-from wavestack.cli.sim_pzt import default_pzt_config
+from wavestack.config.schema import ConfigError
+from wavestack.simulated import piezo_device
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 MINIMAL = 'url = "sim://mdt693b"\nvolts_per_radian = 2.0\nbias_v = 75.0\n'
@@ -50,7 +50,7 @@ def test_minimal_config_takes_defaults_and_builds_objects(tmp_path: Path) -> Non
     piezo = build_piezo(settings)
     assert (piezo.url, piezo.axes, piezo.readback_tolerance_v) == ("sim://mdt693b", ("x",), 0.5)
     assert build_calibration(settings).voltage_for(1.0) == 77.0
-    device = build_simulated_device(simulator)
+    device = piezo_device(simulator)
     assert (device.personality.prompt, device.vlimit_v, device.personality.decimals) == ("*", 75.0, 1)
 
 
@@ -59,9 +59,9 @@ def test_an_mdt693a_or_a_b_unit_in_its_a_mode_is_configured_end_to_end(tmp_path:
     settings, simulator = load_pzt_config(write(
         tmp_path, MINIMAL + 'command_set = "mdt693a"\n', "[pzt.simulator]\ncompatibility_mode = true\n"))
     assert build_piezo(settings).configured_command_set == "mdt693a"
-    assert build_simulated_device(simulator).compatibility_mode is True
+    assert piezo_device(simulator).compatibility_mode is True
     _, a_unit = load_pzt_config(write(tmp_path, MINIMAL, '[pzt.simulator]\nmodel = "MDT693A"\n'))
-    assert build_simulated_device(a_unit).personality.model == "MDT693A"
+    assert piezo_device(a_unit).personality.model == "MDT693A"
     # the default detects the command set at open
     assert build_piezo(load_pzt_config(write(tmp_path, MINIMAL))[0]).configured_command_set == "auto"
 

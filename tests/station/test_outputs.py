@@ -12,6 +12,7 @@ import pytest
 
 from wavestack.config import OutputSettings, load_plc_config
 from wavestack.drivers.plc import PolishingLink
+from wavestack.simulated import plc_layout, polishing_station
 from wavestack.simulators.plc import PlcSimulator, WatchdogState
 from wavestack.station.output_state import OutputMode
 from wavestack.station.outputs import PlcOutput
@@ -23,8 +24,8 @@ WAVELENGTH_NM = 100.0  # 1 wave of wavefront = 100 nm of removal with gain 1, su
 @contextmanager
 def _output(watchdog_timeout_s: float = 60.0, **kwargs: float) -> Iterator[tuple[PlcSimulator, PlcOutput]]:
     config = load_plc_config(None)
-    layout = replace(config.sim_layout(), watchdog_timeout_s=watchdog_timeout_s)
-    with PlcSimulator(layout, config.polishing_station()) as sim, \
+    layout = replace(plc_layout(config), watchdog_timeout_s=watchdog_timeout_s)
+    with PlcSimulator(layout, polishing_station(config)) as sim, \
             PolishingLink("127.0.0.1", sim.port, config.link.register_map(), config.link.link_timing()) as link:
         link.connect(timeout_s=2.0)
         link.self_check(timeout_s=2.0)

@@ -35,8 +35,9 @@ import pytest
 from wavestack.config.schema import ConfigError
 from wavestack.pipeline import ModalReconstructor
 from wavestack.pipeline import mode_list
-from wavestack.simulators.optic import ApertureShape, TestOptic
-from wavestack.simulators.spots import SpotRenderer, SpotTruth
+from wavestack.simulated import as_simulator
+from wavestack.simulators.optic import ApertureShape, OpticSettings, TestOptic
+from wavestack.simulators.spots import LensletArraySettings, SpotRenderer, SpotTruth
 from wavestack.station.devices import StationDevices
 from wavestack.config import ShackHartmannSettings, StationConfig, load_station_config, parse_station_config
 from wavestack.station import CycleRecord, LensletSlopes, SlopeProcessor, Station, StationResult
@@ -199,7 +200,9 @@ def test_lenslets_going_dark_mid_run(station_factory) -> None:
 
 def _renderer(config: StationConfig) -> SpotRenderer:
     sim = config.camera_simulator
-    return SpotRenderer(TestOptic(config.optic, sim.height, sim.width), config.lenslets, sim.height, sim.width)
+    optic = as_simulator(config.optic, OpticSettings, source=config.source, table="optic")
+    lenslets = as_simulator(config.lenslets, LensletArraySettings, source=config.source, table="lenslets")
+    return SpotRenderer(TestOptic(optic, sim.height, sim.width), lenslets, sim.height, sim.width)
 
 
 def test_reconstructors_are_cached_by_the_lit_set() -> None:

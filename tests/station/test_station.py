@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from wavestack.drivers.errors import DeviceDisconnected
-from wavestack.simulators.optic import ApertureShape, TestOptic
+from wavestack.simulated import as_simulator
+from wavestack.simulators.optic import ApertureShape, OpticSettings, TestOptic
 from wavestack.config import StationConfig, load_station_config
 from wavestack.recording import RecordingReader, StationRecorder, open_recording, recorded_config, replay
 from wavestack.station import CycleRecord, InterferometerOutcome, Station, StationResult
@@ -265,8 +266,9 @@ def test_frames_of_another_size_start_a_new_aperture(station_factory) -> None:
     config = _config()
     station, devices = station_factory(config)
     bench = devices.bench
-    smaller = TestOptic(replace(config.optic, aperture=ApertureShape("circle", centre_px=(110.0, 100.0),
-                                                                      radius_px=90.0)), 200, 224)
+    optic = as_simulator(config.optic, OpticSettings, source=config.source, table="optic")
+    smaller = TestOptic(replace(optic, aperture=ApertureShape("circle", centre_px=(110.0, 100.0), radius_px=90.0)),
+                        200, 224)
 
     def render(block_id: int, time_ns: int, exposure_us: float):
         shift = bench.piezo.voltage("x") * bench.coupling.radians_per_volt

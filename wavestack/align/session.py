@@ -4,10 +4,11 @@
 on the pupil's aperture, the field stage's target per field point, the opened hexapod and field
 stage drivers and the measurement.
 
-- ``[align] simulated = true``: it starts the simulated bench (both PI simulators on loopback, the
-  as-built telescope with a seeded mount error, :mod:`wavestack.simulators.align_bench`) and
-  measures the bench's wavefront maps, or with ``[align] station`` the station's maps through the
-  simulated camera (:mod:`.station_source`, the telescope coupled to the station's optic).
+- ``[align] simulated = true``: the simulator starter (:func:`wavestack.simulated.start_align_bench`,
+  imported only then) starts the simulated bench (both PI simulators on loopback, the as-built
+  telescope with a seeded mount error) and the session measures the bench's wavefront maps, or
+  with ``[align] station`` the station's maps through the simulated camera (:mod:`.station_source`,
+  the telescope coupled to the station's optic).
 - ``[align] simulated = false`` (a real bench, :func:`open_real_session`): nothing simulated is
   started; the drivers open ``[hexapod] url`` and ``[field_stage] url``, the measurement is the
   station of ``[align] station`` (required) on its own devices, and the loop fits and judges
@@ -21,6 +22,7 @@ import logging
 from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,7 +35,6 @@ from wavestack.config.align import AlignConfig
 from wavestack.config.hexapod import HexapodSettings, build_hexapod
 from wavestack.drivers.pi_gcs import PIHexapod
 from wavestack.pipeline import InputError
-from wavestack.simulators.align_bench import AlignmentBench, SurfaceCoupling, draw_mount
 from wavestack.pipeline.telescope import HexapodPose, TmaModel
 
 logger = logging.getLogger(__name__)
@@ -46,7 +47,7 @@ class AlignSession:
     """What an alignment runs on (the loop's keyword arguments, and the simulated bench for tests: None on a
     real bench)."""
 
-    bench: AlignmentBench | None
+    bench: Any
     hexapod: PIHexapod
     field_stage: PIHexapod
     design: TmaModel
@@ -173,13 +174,10 @@ def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | 
     """
     if not config.align.simulated:
         return open_real_session(config, stack)
-    sim = config.align.simulator
-    mount = mount or draw_mount(sim.decentre_mm, sim.despace_mm, sim.tilt_deg, sim.seed)
-    errors = config.as_built if as_built_seed is None else replace(config.as_built, seed=as_built_seed)
-    bench = AlignmentBench(config.design, errors, mount, hexapod=config.hexapod_simulator,
-                           field_stage=config.field_stage_simulator, mm_per_deg=config.align.field_stage_mm_per_deg,
-                           noise_waves=noise_waves, seed=sim.seed)
-    stack.enter_context(bench)
+    from wavestack.simulated import start_align_bench, unknown_mount  # the simulator starter, simulated bench only
+
+    mount = mount or unknown_mount(config)
+    bench = start_align_bench(config, stack, mount=mount, as_built_seed=as_built_seed, noise_waves=noise_waves)
     hexapod = _driver(config.hexapod, stack, f"tcp://127.0.0.1:{bench.hexapod.port}")
     stage = _driver(config.field_stage, stack, f"tcp://127.0.0.1:{bench.field_stage.port}")
     design = TmaModel(config.design)
@@ -197,18 +195,15 @@ def open_session(config: AlignConfig, stack: ExitStack, *, mount: HexapodPose | 
     return AlignSession(bench, hexapod, stage, design, fitter, _field_positions(config), station)
 
 
-def _coupled_station(config: AlignConfig, station_path: Path, bench: AlignmentBench, mask: NDArray[np.bool_],
+def _coupled_station(config: AlignConfig, station_path: Path, bench: Any, mask: NDArray[np.bool_],
                      stack: ExitStack) -> StationSource:
     """The simulated station with the telescope coupled to its optic (the reference's tilt added back)."""
+    from wavestack.simulated import reference_tilt_step  # the simulator starter, simulated bench only
+
     service = open_station_service(station_path, stack)
     optic = getattr(service.devices.bench, "optic", None)
     reflection = getattr(getattr(service.config.optic, "surface", None), "reflection_factor", 2.0)
-    coupling = SurfaceCoupling(bench, getattr(optic, "surface", None), service.config.station.wavelength_nm,
-                               reflection, null_tilt=config.align.null_tilt)
-
-    def prepare() -> NDArray[np.float64]:
-        frame, tilt = coupling.refresh()
-        return tilt.plane(frame.waves.shape)
-
+    prepare = reference_tilt_step(config, bench, getattr(optic, "surface", None),
+                                  service.config.station.wavelength_nm, reflection)
     return StationSource(service, mask, averaged=config.align.averaged, settle_s=config.align.settle_s,
                          timeout_s=config.align.measure_timeout_s, prepare=prepare)

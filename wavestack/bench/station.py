@@ -37,7 +37,7 @@ import time
 from collections.abc import Sequence
 from contextlib import ExitStack
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,8 +46,10 @@ from wavestack.bench.station_cpu import _instrument, _Mark, _mark, _Meter, _per_
 from wavestack.bench.station_figures import STAGES, MachineState, StationPathFigures
 from wavestack.config import StationConfig
 from wavestack.drivers.errors import DeviceError
-from wavestack.simulators.optic import ApertureShape
 from wavestack.station import CycleRecord, SetProcessor, Station, StationDevices, StationResult, open_station_devices
+
+if TYPE_CHECKING:
+    from wavestack.simulators.optic import ApertureShape
 
 logger = logging.getLogger(__name__)
 
@@ -91,6 +93,8 @@ def carrier_config(config: StationConfig, cycles: tuple[float, float] | None = N
 
 def changed_aperture(width: int, height: int) -> ApertureShape:
     """The aperture the optic is switched to mid-run: a tilted ellipse, nothing like the annulus."""
+    from wavestack.simulators.optic import ApertureShape  # the simulated station's optic: loaded with it
+
     return ApertureShape(kind="ellipse", centre_px=(0.5 * width, 0.5 * height),
                          semi_axes_px=(0.40 * width, 0.30 * height), rotation_deg=25.0)
 

@@ -22,17 +22,16 @@ import logging
 import threading
 from collections.abc import Callable
 from contextlib import ExitStack
-from dataclasses import replace
 from pathlib import Path
 
-from wavestack.cli.sim_plc import check_bind
+from wavestack.cli.bind import check_bind
 from wavestack.config.align import AlignConfig, load_align_config
 from wavestack.config.station import load_station_config
 from wavestack.pipeline import InputError
-from wavestack.simulators.align_bench import AlignmentBench, SurfaceCoupling, draw_mount
-from wavestack.simulators.align_bench_remote import RemoteAlignBench
 from wavestack.pipeline.telescope import HexapodPose
-from wavestack.station.devices import simulated_interferometer
+from wavestack.simulated import align_bench, simulated_interferometer
+from wavestack.simulators.align_bench import SurfaceCoupling
+from wavestack.simulators.align_bench_remote import RemoteAlignBench
 
 __all__ = ["announcements", "open_remote_bench", "run_align_bench_simulator"]
 
@@ -73,11 +72,7 @@ def open_remote_bench(config: AlignConfig, stack: ExitStack, *, host: str = "127
     if not station.camera.simulated or station.station.kind != "interferometer":
         raise InputError(f"{station_path}: [camera] url: expected sim://u3v and an interferometer station "
                          "(the bench serves the simulated camera itself)")
-    sim = config.align.simulator if seed is None else replace(config.align.simulator, seed=seed)
-    mount = mount or draw_mount(sim.decentre_mm, sim.despace_mm, sim.tilt_deg, sim.seed)
-    bench = AlignmentBench(config.design, config.as_built, mount, hexapod=config.hexapod_simulator,
-                           field_stage=config.field_stage_simulator, mm_per_deg=config.align.field_stage_mm_per_deg,
-                           seed=sim.seed, host=host, hexapod_port=ports[0], field_stage_port=ports[1])
+    bench = align_bench(config, mount=mount, seed=seed, host=host, hexapod_port=ports[0], field_stage_port=ports[1])
     interferometer, piezo = simulated_interferometer(station)
     surface = getattr(interferometer.optic, "surface", None)
     reflection = getattr(getattr(station.optic, "surface", None), "reflection_factor", 2.0)
@@ -89,7 +84,7 @@ def open_remote_bench(config: AlignConfig, stack: ExitStack, *, host: str = "127
     remote = RemoteAlignBench(bench, interferometer, piezo, coupling, host=host, camera_port=ports[2],
                               piezo_port=piezo_port)
     stack.enter_context(remote)
-    _log.info("align bench: mount error %s (unknown to the host)", mount.as_tuple())
+    _log.info("align bench: mount error %s (unknown to the host)", bench.truth.mount.as_tuple())
     return remote
 
 

@@ -11,8 +11,9 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
-from wavestack.cli.sim_plc import check_bind
+from wavestack.cli.bind import check_bind
 from wavestack.config.hexapod_sim import load_hexapod_sim_config
+from wavestack.simulated import hexapod_settings
 from wavestack.simulators.pi_gcs import HexapodSimulator
 
 __all__ = ["run_hexapod_simulator"]
@@ -48,7 +49,7 @@ def run_hexapod_simulator(config_path: Path | None, host: str, port: int, allow_
         A bad configuration.
     """
     check_bind(host, port, allow_remote, simulator="the hexapod simulator", protocol="GCS over TCP")
-    settings = load_hexapod_sim_config(config_path)
+    settings = hexapod_settings(load_hexapod_sim_config(config_path), source=str(config_path or "the built-in hexapod"))
     simulator = HexapodSimulator(settings, host=host, port=port)
     try:
         simulator.start()

@@ -2,43 +2,20 @@
 
 from __future__ import annotations
 
-import ipaddress
 import logging
 import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
 
+from wavestack.cli.bind import check_bind
 from wavestack.config import ConfigError, load_plc_config
+from wavestack.simulated import machine_settings, plc_layout, polishing_machine, polishing_station
 from wavestack.simulators.plc.server import PlcSimulator
 
-__all__ = ["is_loopback", "run_plc_simulator"]
+__all__ = ["run_plc_simulator"]
 
 _log = logging.getLogger(__name__)
-
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` is ``localhost`` or a loopback IP literal (127.0.0.0/8, ::1)."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def check_bind(host: str, port: int, allow_remote: bool, *, simulator: str, protocol: str) -> None:
-    """Refuse a non-loopback ``host`` without ``allow_remote``, and a port outside 0..65535 (ValueError).
-
-    A simulator's protocol has no authentication: on another interface anyone who reaches the
-    port could command the (simulated) machine.
-    """
-    if not is_loopback(host) and not allow_remote:
-        raise ValueError(f"refusing to serve {simulator} on {host!r}: {protocol} has no authentication, "
-                         "so only a loopback address (127.0.0.1, ::1, localhost) is allowed; pass --allow-remote "
-                         "to serve on another interface")
-    if not 0 <= port <= 65535:
-        raise ValueError(f"port must be 0..65535 (0 = any free port), got {port}")
 
 
 def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remote: bool,
@@ -80,10 +57,10 @@ def run_plc_simulator(config_path: Path | None, host: str, port: int, allow_remo
                           "(see config/plc-sim.toml)")
     machine = None
     if job_folder is not None or config.simulator.machine is not None:
-        if not Path(machine_folder := str(job_folder or config.machine_settings().job_folder)).is_dir():
+        if not Path(machine_folder := str(job_folder or machine_settings(config).job_folder)).is_dir():
             raise ValueError(f"the machine's job folder {machine_folder} does not exist or is not a folder")
-        machine = config.polishing_machine(None, job_folder)
-    simulator = PlcSimulator(config.sim_layout(), config.polishing_station(), host=host, port=port, machine=machine)
+        machine = polishing_machine(config, None, job_folder)
+    simulator = PlcSimulator(plc_layout(config), polishing_station(config), host=host, port=port, machine=machine)
     try:
         simulator.start()
     except OSError as error:

@@ -12,7 +12,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from wavestack.config import build_simulated_device, load_pzt_config, parse_pzt_config
+from wavestack.config import load_pzt_config, parse_pzt_config
+from wavestack.simulated import piezo_device
 from wavestack.simulators.mdt693b import PtyBridge
 
 logger = logging.getLogger(__name__)
@@ -67,7 +68,7 @@ def run_pzt_simulator(config_path: Path | None, announce: Callable[[str], None],
         _, simulator = parse_pzt_config(default_pzt_config(), source="built-in pzt simulator defaults")
     else:
         _, simulator = load_pzt_config(config_path)
-    device = build_simulated_device(simulator)
+    device = piezo_device(simulator)
     with PtyBridge(device) as bridge:
         announce(f"pty {bridge.port_path}")
         while not stop.wait(_STOP_POLL_S):

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from contextlib import ExitStack
 from typing import ParamSpec
 
-from wavestack.cli.sim_plc import check_bind
+from wavestack.cli.bind import check_bind
 from wavestack.pipeline import InputError
 from wavestack.web import LiveFeed, WebViewServer
 

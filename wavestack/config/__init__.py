@@ -26,7 +26,6 @@ from wavestack.config.pzt import (
     PiezoSimulatorSettings,
     build_calibration,
     build_piezo,
-    build_simulated_device,
     load_pzt_config,
     parse_pzt_config,
 )

@@ -15,10 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from wavestack.config.hexapod import HexapodSettings, parse_hexapod_config
-from wavestack.config.hexapod_sim import parse_hexapod_sim_config
+from wavestack.config.hexapod_sim import HexapodSimulatorSettings, parse_hexapod_sim_config
 from wavestack.config.schema import ConfigError, load_toml, parse_section, setting
 from wavestack.config.tma import parse_tma_config
-from wavestack.simulators.pi_gcs import HexapodSimSettings
 from wavestack.pipeline.telescope import AsBuiltErrors, TmaDesign
 
 __all__ = ["AlignBenchSettings", "AlignConfig", "AlignSettings", "load_align_config", "parse_align_config"]
@@ -84,8 +83,8 @@ class AlignConfig:
     as_built: AsBuiltErrors
     hexapod: HexapodSettings
     field_stage: HexapodSettings
-    hexapod_simulator: HexapodSimSettings
-    field_stage_simulator: HexapodSimSettings
+    hexapod_simulator: HexapodSimulatorSettings
+    field_stage_simulator: HexapodSimulatorSettings
 
     def station_path(self) -> Path | None:
         """``[align] station`` relative to this file's folder (None when absent)."""

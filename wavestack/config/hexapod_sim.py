@@ -4,7 +4,8 @@
 reads only its ``simulator`` sub-table, so one station file can describe both ends. The same schema
 under another device table (``[field_stage.simulator]``, with axes ``["X", "Y"]``) describes the
 bench's field stage: pass ``table="field_stage"``. Every key is optional; the defaults are the
-six-axis hexapod of :class:`~wavestack.simulators.pi_gcs.HexapodSimSettings`.
+simulator's six-axis hexapod. Settings only: the simulator starter (``wavestack.simulated``) turns
+them into the simulator's own settings, where its checks across keys run.
 
 Example::
 
@@ -23,13 +24,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from wavestack.config.schema import ConfigError, device_tables, load_toml, parse_section, setting
-from wavestack.simulators.pi_gcs import HEXAPOD_AXES, HexapodSimSettings
+from wavestack.config.schema import device_tables, load_toml, parse_section, setting
+from wavestack.drivers.pi_gcs import HEXAPOD_AXES
 
 __all__ = ["HexapodSimulatorSettings", "load_hexapod_sim_config", "parse_hexapod_sim_config"]
 
-_DEFAULTS = HexapodSimSettings()
-_ROTATION_AXES = ("U", "V", "W")
+#: The simulated controller's identity (its ``*IDN?`` answer).
+IDN_DEFAULT = "Physik Instrumente (PI) GmbH & Co. KG, C-887.52, SIM0000001, wavestack simulator 1.0"
 
 
 @dataclass(frozen=True)
@@ -37,40 +38,29 @@ class HexapodSimulatorSettings:
     """``[hexapod.simulator]``: the simulated controller's axes, travel, velocity, pivot and identity."""
 
     axes: tuple[str, ...] = setting(HEXAPOD_AXES, doc="axis identifiers in controller order")
-    low_limits: tuple[float, ...] = setting(_DEFAULTS.low_limits, doc="TMN? per axis, mm or deg")
-    high_limits: tuple[float, ...] = setting(_DEFAULTS.high_limits, doc="TMX? per axis, mm or deg")
-    velocity: float = setting(_DEFAULTS.velocity, minimum=1e-9, maximum=1e6, doc="power-on VLS, units/s")
-    max_velocity: float = setting(_DEFAULTS.max_velocity, minimum=1e-9, maximum=1e6, doc="largest VLS accepted")
+    low_limits: tuple[float, ...] = setting((-17.0, -16.0, -6.5, -14.5, -14.5, -20.0), doc="TMN? per axis, mm or deg")
+    high_limits: tuple[float, ...] = setting((17.0, 16.0, 6.5, 14.5, 14.5, 20.0), doc="TMX? per axis, mm or deg")
+    velocity: float = setting(2.0, minimum=1e-9, maximum=1e6, doc="power-on VLS, units/s")
+    max_velocity: float = setting(20.0, minimum=1e-9, maximum=1e6, doc="largest VLS accepted")
     pivot: tuple[float, float, float] | None = setting(
         None, doc="pivot R S T, mm; default [0, 0, 0] with rotation axes U V W, none without them")
     initial_position: tuple[float, ...] | None = setting(None, doc="power-on positions (default: 0 clipped to limits)")
-    idn: str = setting(_DEFAULTS.idn, doc="the *IDN? answer")
+    idn: str = setting(IDN_DEFAULT, doc="the *IDN? answer")
     referenced: bool = setting(True, doc="axes referenced at power-on (else FRF first)")
     servo: bool = setting(True, doc="servo on at power-on")
-    reference_time_s: float = setting(_DEFAULTS.reference_time_s, minimum=0.0, maximum=600.0,
-                                      doc="shortest reference move (FRF), s")
-
-    def simulator_settings(self) -> HexapodSimSettings:
-        """The simulator's own settings (raises ValueError for inconsistent values)."""
-        pivot = self.pivot
-        if pivot is None and any(axis in _ROTATION_AXES for axis in self.axes):
-            pivot = (0.0, 0.0, 0.0)
-        return HexapodSimSettings(axes=self.axes, low_limits=self.low_limits, high_limits=self.high_limits,
-                                  velocity=self.velocity, max_velocity=self.max_velocity, pivot=pivot,
-                                  initial_position=self.initial_position, idn=self.idn,
-                                  referenced=self.referenced, servo=self.servo,
-                                  reference_time_s=self.reference_time_s)
+    reference_time_s: float = setting(0.2, minimum=0.0, maximum=600.0, doc="shortest reference move (FRF), s")
 
 
-def parse_hexapod_sim_config(document: Mapping[str, Any], *, source: str, table: str = "hexapod") -> HexapodSimSettings:
-    """The simulator settings of ``[<table>.simulator]`` in a parsed TOML document.
+def parse_hexapod_sim_config(document: Mapping[str, Any], *, source: str,
+                             table: str = "hexapod") -> HexapodSimulatorSettings:
+    """The settings of ``[<table>.simulator]`` in a parsed TOML document.
 
     Raises
     ------
     ConfigError
-        Missing ``[<table>]``, any key error :func:`wavestack.config.parse_section` reports, or
-        inconsistent values (limits, axes and positions of different lengths, empty ranges, a
-        velocity above ``max_velocity``); each message names ``source`` and the table.
+        Missing ``[<table>]``, or any key error :func:`wavestack.config.parse_section` reports;
+        each message names ``source`` and the table. Values inconsistent across keys (limits and
+        axes of different lengths) are refused by the simulator starter.
 
     Examples
     --------
@@ -81,16 +71,11 @@ def parse_hexapod_sim_config(document: Mapping[str, Any], *, source: str, table:
     (('X', 'Y'), None)
     """
     _, simulator_table = device_tables(document, table, what="the controller settings", source=source)
-    section = f"{table}.simulator"
-    schema = parse_section(HexapodSimulatorSettings, simulator_table or {}, source=source, section=section)
-    try:
-        return schema.simulator_settings()
-    except ValueError as error:
-        raise ConfigError(f"{source}: [{section}] {error}") from None
+    return parse_section(HexapodSimulatorSettings, simulator_table or {}, source=source, section=f"{table}.simulator")
 
 
-def load_hexapod_sim_config(path: str | Path | None, *, table: str = "hexapod") -> HexapodSimSettings:
+def load_hexapod_sim_config(path: str | Path | None, *, table: str = "hexapod") -> HexapodSimulatorSettings:
     """Read ``[<table>.simulator]`` from a TOML file; None gives the built-in hexapod."""
     if path is None:
-        return HexapodSimSettings()
+        return HexapodSimulatorSettings()
     return parse_hexapod_sim_config(load_toml(path), source=str(path), table=table)

@@ -8,9 +8,9 @@ runs jobs: its job folder, speed, its own tool and its own limits. ``config/plc-
 is the simulator's file and equals the built-in defaults; ``config/plc-example.toml`` is a commented
 example for a real PLC.
 
-This module is the only place that knows both the driver and the simulator: it turns one checked
-configuration into the driver's :class:`RegisterMap` and :class:`LinkTiming` and into the
-simulator's own :class:`PlcSimLayout`, :class:`PolishingStation` and :class:`PolishingMachine`.
+This module declares the settings and turns the link's into the driver's :class:`RegisterMap` and
+:class:`LinkTiming`; the simulator starter (``wavestack.simulated``) turns the same settings into
+the simulator's own layout, display model and machine.
 """
 
 from __future__ import annotations
@@ -26,9 +26,6 @@ from wavestack.config.schema import ConfigError, device_tables, load_toml, parse
 from wavestack.drivers.plc.jobs import JobLimits
 from wavestack.drivers.plc.register_map import RegisterMap
 from wavestack.drivers.plc.transport import LinkTiming
-from wavestack.simulators.plc.machine import MachineSimSettings, PolishingMachine, RemovalTarget
-from wavestack.simulators.plc.polishing import PolishingStation
-from wavestack.simulators.plc.program import PlcSimLayout
 
 __all__ = ["MachineModelSettings", "PlcConfig", "PlcLinkSettings", "PlcSimulatorSettings", "PolishingModelSettings",
            "load_plc_config", "parse_plc_config"]
@@ -188,57 +185,6 @@ class PlcConfig:
     link: PlcLinkSettings
     simulator: PlcSimulatorSettings | None
     source: str
-
-    def sim_layout(self) -> PlcSimLayout:
-        """The simulator's register layout, from the same settings as the driver's map."""
-        link = self.link
-        return PlcSimLayout(
-            unit_id=link.unit_id, self_check_register=link.self_check_register,
-            self_check_value=link.self_check_value,
-            self_check_word_order=link.self_check_word_order or link.word_order,
-            heartbeat_register=link.heartbeat_register, rearm_register=link.rearm_register,
-            status_register=link.status_register, command_block=link.command_block,
-            output_block=link.output_block, command_word_order=link.command_word_order or link.word_order,
-            output_word_order=link.output_word_order or link.word_order,
-            watchdog_timeout_s=link.watchdog_timeout_s,
-            read_function=link.read_function_code, single_write_function=link.single_write_function_code,
-            pass_duration_s=self.simulator.polishing.pass_duration_s if self.simulator else 0.0,
-            job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order)
-
-    def machine_settings(self, job_folder: str | Path | None = None) -> MachineSimSettings:
-        """The simulated machine's settings from ``[plc.simulator.machine]`` (defaults if absent).
-
-        The job folder is ``job_folder`` if given, else the table's, else ``[plc] job_folder``.
-
-        Raises
-        ------
-        ConfigError
-            No job folder anywhere.
-        """
-        model = (self.simulator.machine if self.simulator else None) or MachineModelSettings()
-        folder = job_folder or model.job_folder or self.link.job_folder
-        if folder is None:
-            raise ConfigError(f"{self.source}: the simulated machine needs a job folder: [plc.simulator.machine] "
-                              "job_folder or [plc] job_folder")
-        return MachineSimSettings(
-            Path(folder), time_scale=model.time_scale, tif_fwhm_mm=model.tif_fwhm_mm,
-            tif_peak_rate_nm_s=model.tif_peak_rate_nm_s, width_error=model.width_error, rate_error=model.rate_error,
-            efficiency_spread=model.efficiency_spread, noise_nm=model.noise_nm, seed=model.seed,
-            max_points=model.max_points, max_total_dwell_s=model.max_total_dwell_s,
-            max_dwell_per_point_s=model.max_dwell_per_point_s, max_feed_mm_s=model.max_feed_mm_s,
-            travel_x_mm=model.travel_x_mm, travel_y_mm=model.travel_y_mm)
-
-    def polishing_machine(self, target: RemovalTarget | None, job_folder: str | Path | None = None
-                          ) -> PolishingMachine:
-        """A fresh simulated machine polishing ``target`` (None: progress only); see :meth:`machine_settings`."""
-        return PolishingMachine(self.machine_settings(job_folder), target)
-
-    def polishing_station(self) -> PolishingStation:
-        """A fresh simulated machine from ``[plc.simulator.polishing]`` (defaults if absent)."""
-        model = (self.simulator or PlcSimulatorSettings()).polishing
-        return PolishingStation(model.initial_surface_nm, efficiency=model.efficiency,
-                                efficiency_spread=model.efficiency_spread, noise_nm=model.noise_nm,
-                                max_removal_nm=model.max_removal_nm, seed=model.seed)
 
 
 def parse_plc_config(document: Mapping[str, Any], *, source: str) -> PlcConfig:

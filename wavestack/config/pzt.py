@@ -27,7 +27,6 @@ from typing import Any, Literal
 
 from wavestack.config.schema import ConfigError, device_tables, load_toml, parse_section, setting
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
-from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality
 
 Axis = Literal["x", "y", "z"]
 
@@ -111,12 +110,3 @@ def build_piezo(settings: PiezoSettings) -> MDT693B:
 def build_calibration(settings: PiezoSettings) -> PhaseStepCalibration:
     """The phase-step calibration the settings describe."""
     return PhaseStepCalibration(volts_per_radian=settings.volts_per_radian, bias_v=settings.bias_v)
-
-
-def build_simulated_device(simulator: PiezoSimulatorSettings) -> MDT693BDevice:
-    """A fresh simulated controller with the configured personality."""
-    star = simulator.prompt == "*"
-    return MDT693BDevice(MDT693BPersonality(
-        model=simulator.model, echo=simulator.echo, prompt=simulator.prompt, firmware=simulator.firmware,
-        serial_number=simulator.serial_number, vlimit_v=simulator.vlimit_v, decimals=1 if star else 2,
-        compatibility_mode=simulator.compatibility_mode))

@@ -21,11 +21,13 @@ Tables (see ``wavestack/config/default.toml``, the simulated station ``wavestack
     :class:`OutputSettings`: what goes to the PLC, through the safety stage.
 ``[optic]`` (with ``[optic.aperture]`` and optionally ``[optic.surface]``), ``[bench]``
     The simulated test optic and how the simulated piezo moves its fringes. ``[optic.surface]``
-    (:class:`~wavestack.simulators.SurfaceSettings`) gives the optic a height map polishing can
+    (:class:`~wavestack.config.simulated_bench.SurfaceSimulatorSettings`) gives the optic a height map polishing can
     change; its ``map_file`` is read relative to the station file's folder, its ``wavelength_nm``
-    defaults to ``[station] wavelength_nm`` and must equal it when given.
+    defaults to ``[station] wavelength_nm`` and must equal it when given. These tables are
+    settings only (:mod:`wavestack.config.simulated_bench`): the simulator starter
+    (``wavestack.simulated``) builds the bench from them.
 ``[lenslets]``
-    The simulated lenslet array (:class:`~wavestack.simulators.spots.LensletArraySettings`) of a
+    The simulated lenslet array (:class:`~wavestack.config.simulated_bench.LensletSimulatorSettings`) of a
     simulated Shack-Hartmann camera. ``pitch_px``, ``offset_px`` and ``grid_shape`` default to
     the ``[shack_hartmann]`` values, ``gain_px`` to ``f lambda / p**2`` from them and the
     wavelength, ``bit_depth`` to the simulated camera's pixel format.
@@ -44,11 +46,9 @@ from wavestack.config.camera import CameraSimulatorSettings, parse_camera_config
 from wavestack.config.schema import ConfigError, load_toml, parse_section
 from wavestack.config.plc import parse_plc_config
 from wavestack.config.pzt import parse_pzt_config
-from wavestack.simulators.bench import PiezoCoupling
-from wavestack.simulators.optic import OpticSettings
-from wavestack.simulators.spots import LensletArraySettings
 from wavestack.config.processing import ProcessingSettings
 from wavestack.config.shack_hartmann import ShackHartmannSettings
+from wavestack.config.simulated_bench import BenchSimulatorSettings, LensletSimulatorSettings, OpticSimulatorSettings
 from wavestack.config.station_rules import check_station_rules
 from wavestack.config.station_schema import OutputSettings, StationConfig, StationSettings
 
@@ -104,14 +104,14 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
     if camera.simulated:
         if "optic" not in document:
             raise ConfigError(f"{source}: [camera] url = 'sim://u3v' needs an [optic] table (the simulated optic)")
-        optic = _simulated_surface(_section(OpticSettings, document, "optic", source), document["optic"], station,
+        optic = _simulated_surface(_section(OpticSimulatorSettings, document, "optic", source), document["optic"], station,
                                    source)
     config = StationConfig(
         source=source, text=text, station=station,
         processing=processing, camera=camera, camera_simulator=camera_simulator,
         pzt=pzt, pzt_simulator=pzt_simulator, plc=plc,
         outputs=_section(OutputSettings, document, "outputs", source),
-        optic=optic, bench=_section(PiezoCoupling, document, "bench", source),
+        optic=optic, bench=_section(BenchSimulatorSettings, document, "bench", source),
     )
     check_station_rules(config)
     return config
@@ -140,7 +140,7 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
         if missing:
             raise ConfigError(f"{source}: a simulated Shack-Hartmann camera (url = 'sim://u3v') needs "
                               f"[{missing[0]}] (the simulated optic and lenslet array)")
-        optic = _simulated_surface(_section(OpticSettings, document, "optic", source), document["optic"], station,
+        optic = _simulated_surface(_section(OpticSimulatorSettings, document, "optic", source), document["optic"], station,
                                    source)
         lenslets = _simulated_lenslets(document["lenslets"], sensor, station, camera_simulator, source)
     config = StationConfig(
@@ -149,14 +149,14 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
         camera=camera, camera_simulator=camera_simulator, pzt=None, pzt_simulator=None,
         plc=parse_plc_config(document, source=source) if "plc" in document else None,
         outputs=_section(OutputSettings, document, "outputs", source),
-        optic=optic, bench=PiezoCoupling(), shack_hartmann=sensor, lenslets=lenslets,
+        optic=optic, bench=BenchSimulatorSettings(), shack_hartmann=sensor, lenslets=lenslets,
     )
     check_station_rules(config)
     return config
 
 
-def _simulated_surface(optic: OpticSettings, table: Mapping[str, Any], station: StationSettings,
-                       source: str) -> OpticSettings:
+def _simulated_surface(optic: OpticSimulatorSettings, table: Mapping[str, Any], station: StationSettings,
+                       source: str) -> OpticSimulatorSettings:
     """``optic`` with ``[optic.surface]`` completed: the map file found, the wavelength the station's."""
     surface = optic.surface
     if surface is None:
@@ -179,11 +179,11 @@ def _simulated_surface(optic: OpticSettings, table: Mapping[str, Any], station: 
 
 
 def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: StationSettings,
-                        camera: CameraSimulatorSettings, source: str) -> LensletArraySettings:
+                        camera: CameraSimulatorSettings, source: str) -> LensletSimulatorSettings:
     """``[lenslets]``, its absent geometry taken from ``[shack_hartmann]`` (module notes)."""
     depth = BIT_DEPTH[camera.pixel_format]
     try:
-        parsed = parse_section(LensletArraySettings, table, source=source, section="lenslets")
+        parsed = parse_section(LensletSimulatorSettings, table, source=source, section="lenslets")
         given = set(table)
         derived: dict[str, Any] = {name: getattr(sensor, name) for name in ("pitch_px", "offset_px", "grid_shape")
                                    if name not in given}

@@ -15,9 +15,7 @@ from wavestack.config.processing import ProcessingSettings
 from wavestack.config.pzt import PiezoSettings, PiezoSimulatorSettings
 from wavestack.config.schema import setting
 from wavestack.config.shack_hartmann import ShackHartmannSettings
-from wavestack.simulators.bench import PiezoCoupling
-from wavestack.simulators.optic import OpticSettings
-from wavestack.simulators.spots import LensletArraySettings
+from wavestack.config.simulated_bench import BenchSimulatorSettings, LensletSimulatorSettings, OpticSimulatorSettings
 
 __all__ = ["OutputSettings", "StationConfig", "StationSettings"]
 
@@ -71,10 +69,10 @@ class StationConfig:
     pzt_simulator: PiezoSimulatorSettings | None
     plc: PlcConfig | None
     outputs: OutputSettings
-    optic: OpticSettings | None
-    bench: PiezoCoupling
+    optic: OpticSimulatorSettings | None
+    bench: BenchSimulatorSettings
     shack_hartmann: ShackHartmannSettings | None = None
-    lenslets: LensletArraySettings | None = None
+    lenslets: LensletSimulatorSettings | None = None
 
     @property
     def phase_stepping(self) -> bool:

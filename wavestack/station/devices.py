@@ -1,10 +1,10 @@
 """Open a station's devices from its configuration: real hardware, or the simulated bench.
 
-``sim://`` URLs make the station build the simulators itself, so nothing has to be launched by
-hand: the test optic and the USB3 Vision camera that looks at it (a pyusb backend) -- through an
-interferometer, or behind a lenslet array for a Shack-Hartmann station -- the MDT693B
-behind ``sim://mdt693b/NAME`` (wired to the camera so the fringes move with its voltage), and the
-polishing PLC on a free loopback port. The drivers are the same either way.
+``sim://`` URLs make the station start the simulators first, through the simulator starter
+(:func:`wavestack.simulated.start_simulated_station`: the test optic and the USB3 Vision camera
+that looks at it, the MDT693B behind ``sim://mdt693b/NAME``, the polishing PLC on a free loopback
+port), which this module imports only then: a real bench never loads a simulator. The drivers are
+the same either way.
 """
 
 from __future__ import annotations
@@ -17,20 +17,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from wavestack.config import StationConfig, build_calibration, build_piezo
 from wavestack.drivers.errors import DeviceDisconnected
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
 from wavestack.drivers.plc import CommandLimits, PolishingLink
 from wavestack.drivers.u3v import U3VCamera
 from wavestack.drivers.u3v.usb_tcp import UsbTcpBackend, parse_usbtcp_url
-from wavestack.config import BIT_DEPTH, StationConfig, build_calibration, build_piezo, build_simulated_device
-from wavestack.simulators import attach_simulated_device, register_serial_simulators
-from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
-from wavestack.simulators.optic import TestOptic
-from wavestack.simulators.plc import PlcSimulator, PolishingMachine
-from wavestack.simulators.spots import SpotRenderer, SpotTruth
-from wavestack.simulators.u3v import U3VSimSettings
-from wavestack.station.sim_truth import InterferometerTruthCheck, ShackHartmannTruthCheck
 from wavestack.station.truth import TruthCheck
 
 logger = logging.getLogger(__name__)
@@ -46,9 +39,11 @@ class StationDevices:
     piezo : MDT693B or None
     calibration : PhaseStepCalibration or None
     link : PolishingLink or None
-    bench : SimulatedInterferometer or SimulatedShackHartmann or None
-        The simulated bench (ground truth), when the camera is simulated.
-    plc_simulator : PlcSimulator or None
+    bench : object or None
+        The simulated bench (``wavestack.simulators``' interferometer or Shack-Hartmann bench: the
+        ground truth), when the camera is simulated.
+    plc_simulator : object or None
+        The running PLC simulator, when the PLC is simulated.
     truth_check : TruthCheck or None
         Compares results with the simulator's truth, when the camera is simulated.
     """
@@ -57,15 +52,15 @@ class StationDevices:
     piezo: MDT693B | None = None
     calibration: PhaseStepCalibration | None = None
     link: PolishingLink | None = None
-    bench: SimulatedInterferometer | SimulatedShackHartmann | None = None
-    plc_simulator: PlcSimulator | None = None
+    bench: Any = None
+    plc_simulator: Any = None
     truth_check: TruthCheck | None = None
 
-    def truth(self, frame: Frame) -> FrameTruth | SpotTruth | None:
+    def truth(self, frame: Frame) -> Any:
         """The simulator's ground truth of a frame (None on real hardware or when evicted).
 
-        A :class:`FrameTruth` from a simulated interferometer, a :class:`SpotTruth` from a
-        simulated Shack-Hartmann camera.
+        The simulated interferometer's frame truth, or the simulated Shack-Hartmann camera's
+        spot truth.
         """
         if self.bench is None:
             return None
@@ -114,48 +109,6 @@ def reconnect_devices(devices: StationDevices, config: StationConfig, *, force_c
         logger.info("piezo %s is back", piezo.name)
 
 
-def simulated_interferometer(config: StationConfig) -> tuple[SimulatedInterferometer, Any]:
-    """The simulated interferometer a ``sim://u3v`` station file describes, and its piezo device (or None).
-
-    Also used by the remote alignment-bench simulator, which serves them from another process.
-    """
-    sim = config.camera_simulator
-    optic_settings = config.optic
-    assert optic_settings is not None  # parse_station_config requires [optic] for sim://u3v
-    if optic_settings.bit_depth != BIT_DEPTH[sim.pixel_format]:
-        raise ValueError(f"{config.source}: [optic] bit_depth {optic_settings.bit_depth} does not match "
-                         f"[camera.simulator] pixel_format {sim.pixel_format!r}")
-    piezo_device = None
-    if config.pzt is not None and config.pzt.url.startswith("sim://"):
-        assert config.pzt_simulator is not None
-        piezo_device = build_simulated_device(config.pzt_simulator)
-    bench = SimulatedInterferometer(
-        TestOptic(optic_settings, sim.height, sim.width),
-        U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
-                       frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml),
-        piezo_device, config.bench)
-    return bench, piezo_device
-
-
-def _simulated_shack_hartmann(config: StationConfig) -> SimulatedShackHartmann:
-    sim = config.camera_simulator
-    assert config.optic is not None and config.lenslets is not None  # required by parse_station_config
-    spots = SpotRenderer(TestOptic(config.optic, sim.height, sim.width), config.lenslets, sim.height, sim.width)
-    return SimulatedShackHartmann(
-        spots, U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
-                              frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml))
-
-
-def _truth_check(bench: SimulatedInterferometer | SimulatedShackHartmann | None,
-                 config: StationConfig) -> TruthCheck | None:
-    """The comparison with the simulator's truth (simulated cameras only)."""
-    if isinstance(bench, SimulatedShackHartmann):
-        return ShackHartmannTruthCheck(bench)
-    if isinstance(bench, SimulatedInterferometer):
-        return InterferometerTruthCheck(bench, config.processing.fit_decimation)
-    return None
-
-
 def _usb_backend(url: str, stack: ExitStack) -> UsbTcpBackend | None:
     """The pyusb backend of a camera URL: libusb (None) for ``usb://``, the TCP bus for ``usbtcp://``."""
     if not url.startswith("usbtcp://"):
@@ -166,16 +119,8 @@ def _usb_backend(url: str, stack: ExitStack) -> UsbTcpBackend | None:
     return backend
 
 
-def _piezo_url(url: str, name: str) -> str:
-    """``sim://mdt693b`` gets a device name so the station's bench and driver share one device."""
-    scheme_and_model, _, rest = url.partition("?")
-    if scheme_and_model.count("/") == 2:  # sim://model without a name
-        scheme_and_model = f"{scheme_and_model.rstrip('/')}/{name}"
-    return scheme_and_model + (f"?{rest}" if rest else "")
-
-
 def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder: Path | None = None) -> StationDevices:
-    """Open (and, for ``sim://`` URLs, first build) every device; ``stack`` closes them all.
+    """Open (and, for ``sim://`` URLs, first start) every device; ``stack`` closes them all.
 
     A simulated PLC gets a polishing machine (``[plc.simulator.machine]``, or its defaults when
     ``job_folder`` is given) that reads its jobs from ``job_folder`` (else the configured folder)
@@ -185,35 +130,32 @@ def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder:
     ------
     DeviceError
         A device that does not answer at start, or a PLC whose self-check fails.
-    ValueError
-        Inconsistent simulator settings.
+    ConfigError, ValueError
+        Simulator settings the simulators refuse.
     """
     timeout = config.camera.timeout_s
-    bench: SimulatedInterferometer | SimulatedShackHartmann | None = None
-    piezo_device = None
-    if config.camera.simulated:
-        if config.station.kind == "shack-hartmann":
-            bench = _simulated_shack_hartmann(config)
-        else:
-            bench, piezo_device = simulated_interferometer(config)
-        camera = U3VCamera.open(backend=bench.backend, timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
+    devices = StationDevices(camera=None)  # type: ignore[arg-type]  # the camera is opened next
+    simulated = None
+    if _any_simulated(config):
+        from wavestack.simulated import start_simulated_station  # the simulator starter, for sim:// only
+
+        simulated = start_simulated_station(config, stack, name=f"station-{id(devices):x}", job_folder=job_folder)
+        devices.bench, devices.plc_simulator = simulated.bench, simulated.plc_simulator
+    if devices.bench is not None:
+        camera = U3VCamera.open(backend=devices.bench.backend, timeout_s=timeout,
+                                ring_capacity=config.camera.ring_capacity)
+        devices.truth_check = _truth_check(devices.bench, config)
     else:
         camera = U3VCamera.open(backend=_usb_backend(config.camera.url, stack), serial=config.camera.serial,
                                 timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
     stack.callback(camera.close)
     configure_camera(camera, config)
-    devices = StationDevices(camera=camera, bench=bench, truth_check=_truth_check(bench, config))
+    devices.camera = camera
 
     if config.pzt is not None and config.phase_stepping:
         settings = config.pzt
-        if settings.url.startswith("sim://"):
-            register_serial_simulators()
-            name = f"station-{id(devices):x}"
-            if piezo_device is None:
-                assert config.pzt_simulator is not None
-                piezo_device = build_simulated_device(config.pzt_simulator)
-            stack.enter_context(attach_simulated_device(name, piezo_device))
-            settings = dataclasses.replace(settings, url=_piezo_url(settings.url, name))
+        if simulated is not None and simulated.piezo_url is not None:
+            settings = dataclasses.replace(settings, url=simulated.piezo_url)
         piezo = build_piezo(settings)
         stack.callback(piezo.close)
         piezo.open(timeout_s=settings.timeout_s)
@@ -223,13 +165,8 @@ def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder:
     if config.plc is not None and config.outputs.enabled:
         link_settings = config.plc.link
         host, port = link_settings.host, link_settings.port
-        if link_settings.simulated:
-            simulator = PlcSimulator(config.plc.sim_layout(), config.plc.polishing_station(), port=0,
-                                     machine=_simulated_machine(config, bench, job_folder))
-            simulator.start()
-            stack.callback(simulator.stop)
-            host, port = simulator.host, simulator.port
-            devices.plc_simulator = simulator
+        if devices.plc_simulator is not None:
+            host, port = devices.plc_simulator.host, devices.plc_simulator.port
         link = PolishingLink(host, port, link_settings.register_map(), link_settings.link_timing(),
                              command_limits=CommandLimits(config.outputs.max_removal_nm, config.outputs.max_step_nm),
                              job_limits=link_settings.job_limits())
@@ -240,15 +177,19 @@ def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder:
     return devices
 
 
-def _simulated_machine(config: StationConfig, bench: SimulatedInterferometer | SimulatedShackHartmann | None,
-                       job_folder: Path | None) -> PolishingMachine | None:
-    """The simulated PLC's polishing machine, polishing the simulated optic's surface (None: no jobs)."""
-    assert config.plc is not None
-    table = config.plc.simulator.machine if config.plc.simulator is not None else None
-    if table is None and job_folder is None:
-        return None
-    surface = bench.optic.surface if isinstance(bench, SimulatedInterferometer) else None
-    return config.plc.polishing_machine(surface, job_folder)
+def _any_simulated(config: StationConfig) -> bool:
+    """True when a configured URL names a simulated device (``sim://``)."""
+    return (config.camera.simulated or (config.pzt is not None and config.pzt.url.startswith("sim://"))
+            or (config.plc is not None and config.plc.link.simulated))
+
+
+def _truth_check(bench: Any, config: StationConfig) -> TruthCheck:
+    """The comparison with a simulated camera's truth (:mod:`~wavestack.station.sim_truth`, which reads it)."""
+    from wavestack.station.sim_truth import InterferometerTruthCheck, ShackHartmannTruthCheck  # sim:// only
+
+    if config.station.kind == "shack-hartmann":
+        return ShackHartmannTruthCheck(bench)
+    return InterferometerTruthCheck(bench, config.processing.fit_decimation)
 
 
 def phase_steps_rad(config: StationConfig) -> tuple[float, ...]:
