@@ -30,7 +30,8 @@ def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FE
 
     Each feature is an ``Integer``/``Float``/``Enumeration``/``Command`` node whose ``pValue`` names
     an ``IntReg``/``FloatReg`` called ``<Feature>Reg`` (little-endian, hexadecimal ``Address``); a
-    feature another one locks carries ``pIsLocked``. Each string feature is a ``StringReg`` on its
+    feature another one locks carries ``pIsLocked``, a register other writes change names them in
+    ``pInvalidator``. Each string feature is a ``StringReg`` on its
     ABRM string. The SFNC categories (:data:`CATEGORIES`) under ``Root`` list every feature, and a
     ``Port`` node named ``Device`` is included as any GenICam file has it.
     """
@@ -88,6 +89,8 @@ def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FE
         child(reg, "Length", str(spec.length))
         child(reg, "AccessMode", spec.access)
         child(reg, "pPort", "Device")
+        for feature in spec.invalidated_by:
+            child(reg, "pInvalidator", feature + "Reg")
         if spec.kind != "Float":
             child(reg, "Sign", "Unsigned")
         child(reg, "Endianess", "LittleEndian")

@@ -33,6 +33,7 @@ import struct
 from collections.abc import Callable
 from typing import Protocol
 
+from wavestack.simulators.genicam import VendorPersonality, register_accessors
 from wavestack.simulators.u3v.device_description import (ABRM_ADDRESS, DEVICE_STRINGS, FEATURE_BASE_ADDRESS, FEATURES,
                                                          PIXEL_FORMAT_ENTRIES, DeviceIdentity, FeatureKind,
                                                          FeatureSpec)
@@ -228,7 +229,17 @@ def _manifest(file: bytes, format_info: int) -> list[Register]:
             _constant("GenICamFile", XML_ADDRESS, file)]
 
 
-def build_register_map(identity: DeviceIdentity, hooks: RegisterHooks, *, zipped_xml: bool) -> RegisterMap:
+def _vendor_registers(personality: VendorPersonality, hooks: RegisterHooks) -> list[Register]:
+    registers = []
+    for spec in personality.registers:
+        read, write = register_accessors(personality, spec, hooks, GenCPStatus.INVALID_PARAMETER)
+        registers.append(Register(f"{personality.name}@0x{spec.address:X}", spec.address, spec.length, spec.access,
+                                  read, None if write is None else (lambda data, w=write: GenCPStatus(w(data)))))
+    return registers
+
+
+def build_register_map(identity: DeviceIdentity, hooks: RegisterHooks, *, zipped_xml: bool,
+                       vendor: tuple[VendorPersonality, bytes] | None = None) -> RegisterMap:
     """The complete register space of one simulated camera.
 
     Parameters
@@ -239,8 +250,14 @@ def build_register_map(identity: DeviceIdentity, hooks: RegisterHooks, *, zipped
         The device behind the SIRM and feature registers.
     zipped_xml
         Serve the GenICam file as a ZIP archive instead of plain XML.
+    vendor
+        A real camera's register map and its XML, served instead of the simulator's own.
     """
-    file, format_info = manifest_file(genicam_xml(identity), zipped_xml)
+    xml = genicam_xml(identity) if vendor is None else vendor[1]
+    file, format_info = manifest_file(xml, zipped_xml)
     registers = _abrm(identity, hooks) + _sbrm(identity) + _sirm(hooks) + _manifest(file, format_info)
-    registers += [_feature_register(spec, hooks) for spec in FEATURES]
+    if vendor is None:
+        registers += [_feature_register(spec, hooks) for spec in FEATURES]
+    else:
+        registers += _vendor_registers(vendor[0], hooks)
     return RegisterMap(registers)
