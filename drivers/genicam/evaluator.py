@@ -146,6 +146,7 @@ class Evaluator:
         variables = {e.attributes.get("Name", ""): e.text for e in node.all("pVariable")}
         constants = {e.attributes.get("Name", ""): e.text for e in node.all("Constant")}
         expressions = {e.attributes.get("Name", ""): e.text for e in node.all("Expression")}
+        expanding: list[str] = []
 
         def lookup(variable: str) -> int | float:
             if variable in extra:
@@ -155,8 +156,13 @@ class Evaluator:
             if variable in constants:
                 return _float(constants[variable], node.name)
             if variable in expressions:
-                tree = parse_formula(expressions[variable])
-                return evaluate(tree, lookup, integer=node.tag.startswith("Int"))
+                if variable in expanding:
+                    raise FormulaError(f"expression {variable} refers to itself")
+                expanding.append(variable)
+                try:
+                    return evaluate(parse_formula(expressions[variable]), lookup, integer=node.tag.startswith("Int"))
+                finally:
+                    expanding.pop()
             raise FormulaError(f"variable {variable!r} is not defined by a pVariable")
 
         try:

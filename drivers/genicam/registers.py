@@ -117,50 +117,49 @@ def encode_integer(value: int, length: int, endianness: Endianness, signed: bool
     return merged.to_bytes(length, order)
 
 
-@dataclass(frozen=True)
-class _Cached:
-    port: str
-    address: int
-    data: bytes
-
-
 class RegisterCache:
-    """Bytes of register nodes, kept by their ``Cachable`` policy.
+    """Register bytes, kept by the ``Cachable`` policy of the node that read or wrote them.
 
-    ``WriteThrough`` (the default) keeps what was read and what was written; ``WriteAround`` keeps
-    what was read and forgets on write; ``NoCache`` keeps nothing. A write also forgets every
-    cached register that overlaps the written bytes on the same port, and :meth:`forget` drops the
-    nodes a write invalidates (``pInvalidator``), which the evaluator works out.
+    Entries are keyed by port, address and length, so the entries of a ``StructReg`` and the
+    ``MaskedIntReg`` nodes of one register share one read. ``WriteThrough`` (the default) keeps
+    what was read and what was written; ``WriteAround`` keeps what was read and forgets on write;
+    ``NoCache`` keeps nothing. A write also forgets every cached register that overlaps the written
+    bytes on the same port, and :meth:`forget` drops the registers of the nodes a write invalidates
+    (``pInvalidator``), which the evaluator works out.
     """
 
     def __init__(self) -> None:
-        self._entries: dict[str, _Cached] = {}
+        self._entries: dict[tuple[str, int, int], bytes] = {}
+        self._keys: dict[str, tuple[str, int, int]] = {}  # node -> the register it last used
 
     def read(self, node: str, port: str, address: int, length: int, policy: Cachable,
              fetch: Callable[[], bytes]) -> bytes:
-        """The node's bytes: from the cache when it holds this address, else ``fetch()`` (then kept)."""
-        cached = self._entries.get(node)
-        if cached is not None and cached.port == port and cached.address == address and len(cached.data) == length:
-            return cached.data
+        """The register's bytes: from the cache when held (and the node's policy allows), else ``fetch()``."""
+        key = (port, address, length)
+        self._keys[node] = key
+        if policy != "NoCache" and key in self._entries:
+            return self._entries[key]
         data = fetch()
         if policy != "NoCache":
-            self._entries[node] = _Cached(port, address, data)
+            self._entries[key] = data
         return data
 
     def wrote(self, node: str, port: str, address: int, data: bytes, policy: Cachable) -> None:
         """Record a write of ``data`` at ``address`` through ``node`` (after the device took it)."""
         end = address + len(data)
-        stale = [name for name, c in self._entries.items()
-                 if c.port == port and c.address < end and address < c.address + len(c.data)]
-        for name in stale:
-            del self._entries[name]
+        for key in [k for k in self._entries if k[0] == port and k[1] < end and address < k[1] + k[2]]:
+            del self._entries[key]
+        key = (port, address, len(data))
+        self._keys[node] = key
         if policy == "WriteThrough":
-            self._entries[node] = _Cached(port, address, bytes(data))
+            self._entries[key] = bytes(data)
 
     def forget(self, nodes: set[str] | frozenset[str]) -> None:
-        """Drop the named nodes' bytes."""
+        """Drop the registers the named nodes last used."""
         for name in nodes:
-            self._entries.pop(name, None)
+            key = self._keys.get(name)
+            if key is not None:
+                self._entries.pop(key, None)
 
     def clear(self) -> None:
         """Drop everything (a new connection, or a device reset)."""

@@ -50,12 +50,12 @@ def _flir() -> VendorPersonality:
 
 
 def _alvium() -> VendorPersonality:
-    inquiry = {0x0E4: "Width", 0x0F0: "Height", 0x17C: "PixelFormat", 0x36C: "AcquisitionMode",
-               0x370: "AcquisitionStart", 0x374: "AcquisitionStop", 0x3C8: "ExposureTime", 0x3DC: "TriggerMode",
-               0x410: "TriggerSoftware"}
     formats = {0x10101000: "Mono8", 0x1010100C: "Mono12", 0x10101018: "Mono16"}
-    registers = [R(0x0080_0000 + offset, value=0b11) for offset in inquiry]
+    registers = [R(0x0080_0000 + 4 * k, value=0b11) for k in range(0x400)]  # every feature's inquiry word
     registers += [R(address, value=0b11 if address in formats else 0) for address in range(0x10101000, 0x101010B8, 4)]
+    registers += [R(0x1030_0000 + 4 * k, value=0b11 if k == 3 else 0) for k in range(0x14)]  # selectors: FrameStart
+    registers += [R(0x1021_0010 + 4 * k, value=0b11) for k in range(3)]  # AcquisitionMode entries
+    registers += [R(0x1030_0090, value=0b11), R(0x1030_0094, value=0b11)]  # TriggerMode Off, On
     registers += [
         R(0x10100000, access="RW", feature="PixelFormat", codec="pixel_format"),
         R(0x10110000, value=MAX_SIDE), R(0x10110010, value=MAX_SIDE),
@@ -67,7 +67,8 @@ def _alvium() -> VendorPersonality:
         R(0x10220000, access="WO", feature="AcquisitionStart"), R(0x10220010, access="WO", feature="AcquisitionStop"),
         R(0x10240000, length=8, access="RW", feature="ExposureTime", codec="f64"),
         R(0x10240010, length=8, value=10.0, codec="f64"), R(0x10240020, length=8, value=30e6, codec="f64"),
-        R(0x10240030, length=8, value=1.0, codec="f64"),
+        R(0x10240030, length=8, value=0.5, codec="f64"),
+        R(0x1030005C, access="RW", feature="TriggerMode"), R(0x103000DC, access="WO", feature="TriggerSoftware"),
     ]
     return VendorPersonality("alvium-1800u", "u3v", "little", tuple(registers),
                              {"Mono8": 0x01080001, "Mono12": 0x01100005, "Mono16": 0x01100007})
