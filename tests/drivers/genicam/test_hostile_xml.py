@@ -76,7 +76,7 @@ def test_hostile_documents_are_refused_at_load(data: bytes, message: str) -> Non
     ('<Integer Name="Width"><pValue>R</pValue></Integer><IntReg Name="R"><pAddress>K</pAddress><Length>4</Length>'
      '<AccessMode>RW</AccessMode><pPort>Device</pPort></IntReg><IntSwissKnife Name="K"><Formula>1 % 0</Formula>'
      "</IntSwissKnife>", "Width", "division by zero"),
-    ('<IntSwissKnife Name="Width"><Expression Name="E">E + 1</Expression><Formula>E</Formula></IntSwissKnife>',
+    ('<IntSwissKnife Name="Width"><Expression Name="X2">X2 + 1</Expression><Formula>X2</Formula></IntSwissKnife>',
      "Width", "refers to itself"),
     ('<Integer Name="Width"><pValue>N0</pValue></Integer>'
      + "".join(f'<Integer Name="N{i}"><pValue>N{i + 1}</pValue></Integer>' for i in range(80))
