@@ -31,7 +31,8 @@ from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import FrameRing, RingPolicy
 from wavestack.drivers.role_thread import RoleThread
 from wavestack.drivers.u3v import bootstrap as bs
-from wavestack.drivers.u3v.acquisition import RingHistory, StreamReader, U3VCounters, enable_stream
+from wavestack.drivers.ring_history import RingHistory
+from wavestack.drivers.u3v.acquisition import StreamReader, U3VCounters, enable_stream
 from wavestack.drivers.u3v.connection import (CONTROL_PROTOCOL, STREAM_PROTOCOL, U3V_CLASS, U3V_SUBCLASS, Link,
                                               attach, find_device, release)
 from wavestack.drivers.u3v.stream import BlockAssembler
@@ -233,7 +234,8 @@ class U3VCamera(GenICamCamera):
         """Frame counters over the camera's life, across reconnects, and stream health (see :class:`U3VCounters`)."""
         with self._state_lock:
             stats = dict(self._stats)
-        return self._history.with_current(self._ring, stats)
+        c = self._history.with_current(self._ring)
+        return U3VCounters(c.acquired, c.delivered, c.dropped, c.dropped_in_gaps, c.pending, **stats)
 
     def _count(self, key: str) -> None:
         with self._state_lock:

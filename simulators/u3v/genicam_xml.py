@@ -25,11 +25,13 @@ CATEGORIES = ("DeviceControl", "ImageFormatControl", "AcquisitionControl", "Tran
 
 
 def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FEATURES,
-                strings: tuple[StringFeatureSpec, ...] = DEVICE_STRINGS) -> bytes:
+                strings: tuple[StringFeatureSpec, ...] = DEVICE_STRINGS, *, big_endian: bool = False,
+                tooltip: str = "wavestack simulated USB3 Vision camera") -> bytes:
     """The device's GenICam XML (GenApi schema 1.1 subset of the protocol sheet), UTF-8 bytes.
 
     Each feature is an ``Integer``/``Float``/``Enumeration``/``Command`` node whose ``pValue`` names
-    an ``IntReg``/``FloatReg`` called ``<Feature>Reg`` (little-endian, hexadecimal ``Address``); a
+    an ``IntReg``/``FloatReg`` called ``<Feature>Reg`` (little-endian unless ``big_endian``, as GigE
+    Vision registers are; hexadecimal ``Address``); a
     feature another one locks carries ``pIsLocked``, a register other writes change names them in
     ``pInvalidator``. Each string feature is a ``StringReg`` on its
     ABRM string. The SFNC categories (:data:`CATEGORIES`) under ``Root`` list every feature, and a
@@ -38,7 +40,7 @@ def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FE
     guid = uuid.uuid5(uuid.NAMESPACE_DNS, f"{identity.manufacturer}.{identity.model}.wavestack")
     root = ET.Element("RegisterDescription", {
         "ModelName": identity.model, "VendorName": identity.manufacturer,
-        "ToolTip": "wavestack simulated USB3 Vision camera", "StandardNameSpace": "None",
+        "ToolTip": tooltip, "StandardNameSpace": "None",
         "SchemaMajorVersion": "1", "SchemaMinorVersion": "1", "SchemaSubMinorVersion": "0",
         "MajorVersion": "1", "MinorVersion": "0", "SubMinorVersion": "0",
         "ProductGuid": str(guid), "VersionGuid": str(uuid.uuid5(guid, identity.device_version)),
@@ -93,7 +95,7 @@ def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FE
             child(reg, "pInvalidator", feature + "Reg")
         if spec.kind != "Float":
             child(reg, "Sign", "Unsigned")
-        child(reg, "Endianess", "LittleEndian")
+        child(reg, "Endianess", "BigEndian" if big_endian else "LittleEndian")
     child(root, "Port", Name="Device", NameSpace="Standard")
     ET.indent(root)
     return ET.tostring(root, encoding="utf-8", xml_declaration=True)
