@@ -51,6 +51,8 @@ class RegisterSpec:
     codec
         How the value is stored: unsigned ``u32``/``u64``, ``f64``, the vendor's ``pixel_format``
         code, or ``exposure_raw`` (an integer count of :attr:`VendorPersonality.exposure_unit_us`).
+    command_value
+        What a command register takes to execute (the XML's ``CommandValue``).
     """
 
     address: int
@@ -59,6 +61,7 @@ class RegisterSpec:
     value: int | float = 0
     feature: str | None = None
     codec: Codec = "u32"
+    command_value: int = 1
 
 
 @dataclass(frozen=True)
@@ -106,14 +109,14 @@ _COMMANDS = frozenset({"AcquisitionStart", "AcquisitionStop", "TriggerSoftware"}
 MIN_SIDE, MAX_SIDE = 16, 16384
 
 
-def _acceptable(name: str, value: int | float) -> bool:
+def _acceptable(name: str, value: int | float, command_value: int) -> bool:
     """The camera's own range checks (the XML's limits say the same to the host)."""
     if name in ("Width", "Height"):
         return MIN_SIDE <= value <= MAX_SIDE
     if name == "TriggerMode":
         return value in (0, 1)
     if name in _COMMANDS:
-        return value == 1
+        return value == command_value
     if name == "AcquisitionMode":
         return 0 <= value <= 2
     return value == value  # ExposureTime: finite, checked after conversion
@@ -166,7 +169,7 @@ def register_accessors(personality: VendorPersonality, spec: RegisterSpec, hooks
 
     def write(data: bytes) -> int:
         value = unpack(data)
-        if not _acceptable(name, value):
+        if not _acceptable(name, value, spec.command_value):
             return invalid
         if spec.codec == "pixel_format":
             names = [n for n, code in codes.items() if code == value and n in PFNC]

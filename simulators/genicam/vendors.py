@@ -84,7 +84,7 @@ def _basler() -> VendorPersonality:
         R(0x30220, value=_IMP_AVL_31_30), R(0x30224, access="RW", feature="Height"), R(0x30228, value=16),
         R(0x3022C, value=MAX_SIDE), R(0x30230, value=8),
         R(0x40004, access="RW", feature="AcquisitionMode"), R(0x4000C),
-        R(0x40024, access="RW", feature="AcquisitionStart"), R(0x40044, access="RW", feature="AcquisitionStop"),
+        R(0x40024, access="RW", feature="AcquisitionStart"), R(0x40044, access="RW", feature="AcquisitionStop", command_value=0),
         R(0x40110), R(0x40210, value=1), R(0x40310),  # TriggerSelector entries: FrameStart only
         R(0x40204, access="RW", feature="TriggerMode"), R(0x4020C, value=_IMP_AVL_31_30),
         R(0x40220, access="RW", value=_IMP_AVL_31_30), R(0x40224, access="RW", feature="TriggerSoftware"),
