@@ -1,10 +1,11 @@
-"""The public feature verbs every GenICam camera driver offers, whatever its transport.
+"""The public verbs every GenICam camera driver offers, whatever its transport.
 
 :class:`GenICamCamera` is the common face of :class:`~wavestack.drivers.u3v.U3VCamera` and
 :class:`~wavestack.drivers.gige.GigECamera`: reading the image size, pixel format and exposure,
-setting them (validated before anything is sent), the trigger, any feature by name. A driver
-supplies its :class:`~wavestack.drivers.genicam.camera_features.CameraFeatures`, its default
-timeout and whether it is acquiring.
+setting them (validated before anything is sent), the trigger, any feature by name, and reading
+frames from its ring. A driver supplies its
+:class:`~wavestack.drivers.genicam.camera_features.CameraFeatures`, its default timeout, its frame
+ring and whether it is acquiring or closed.
 """
 
 from __future__ import annotations
@@ -13,20 +14,56 @@ import math
 import time
 
 from wavestack.drivers._checks import check_timeout
-from wavestack.drivers.errors import LimitError, ProtocolError
+from wavestack.drivers.errors import DeviceDisconnected, LimitError, ProtocolError
+from wavestack.drivers.frames import Frame
 from wavestack.drivers.genicam.camera_features import CameraFeatures
 from wavestack.drivers.genicam.node_map import NodeMap
+from wavestack.drivers.ring import FrameRing
 
 #: Pixel formats the drivers' stream decoders deliver (PFNC names; Mono12 unpacked in 16 bits).
 DECODABLE_FORMATS = ("Mono8", "Mono12", "Mono16")
 
 
 class GenICamCamera:
-    """Feature verbs on top of a driver's :meth:`_camera_features` (see the module description)."""
+    """Feature verbs on top of a driver's :meth:`_camera_features`, and the frame consumer's verbs on its
+    ring (see the module description)."""
 
     _name: str
     _timeout_s: float
     _acquiring: bool
+    _closed: bool
+    _ring: FrameRing[Frame]
+
+    @property
+    def name(self) -> str:
+        """Device name used in messages (address or USB ids, model, serial)."""
+        return self._name
+
+    def loss_mark(self) -> int:
+        """Frames reported lost so far: take it before a trigger, pass it to :meth:`read_frame`."""
+        return self._ring.losses
+
+    def discard_pending(self) -> int:
+        """Drop the frames waiting in the ring (counted dropped); returns how many."""
+        return self._ring.discard_pending()
+
+    def read_frame(self, timeout_s: float, *, since_loss: int | None = None) -> Frame:
+        """The next frame by the ring's policy.
+
+        ``since_loss``: a :meth:`loss_mark`; a block the stream discarded since then raises
+        :class:`~wavestack.drivers.ring.FrameLost` at once (a triggered frame that will not come).
+
+        Raises
+        ------
+        DeviceTimeout
+            No frame within ``timeout_s`` (e.g. waiting for a trigger, or not started).
+        DeviceDisconnected
+            The camera went away (after the pending frames are read) or was closed (at once:
+            closing is final, frames still pending are not delivered).
+        """
+        if self._closed:
+            raise DeviceDisconnected(self._name, "camera closed")
+        return self._ring.get(timeout_s, fail_after_loss=since_loss)
 
     def _camera_features(self) -> CameraFeatures:
         raise NotImplementedError

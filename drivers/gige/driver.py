@@ -214,11 +214,6 @@ class GigECamera(GenICamCamera):
         return self._live().features
 
     @property
-    def name(self) -> str:
-        """Device name used in messages (address, model, serial)."""
-        return self._name
-
-    @property
     def connected(self) -> bool:
         """True while the camera answers (not closed, heartbeat not lost)."""
         return not self._closed and self._lost is None and self._link is not None
@@ -270,28 +265,6 @@ class GigECamera(GenICamCamera):
     def reading(self) -> bool:
         """True from :meth:`start` until :meth:`stop` or the camera is lost."""
         return self._receiver is not None and self._receiver.running and self._lost is None
-
-    def loss_mark(self) -> int:
-        """Frames reported lost so far: take it before a trigger, pass it to :meth:`read_frame`."""
-        return self._ring.losses
-
-    def discard_pending(self) -> int:
-        """Drop the frames waiting in the ring (counted dropped); returns how many."""
-        return self._ring.discard_pending()
-
-    def read_frame(self, timeout_s: float, *, since_loss: int | None = None) -> Frame:
-        """The next frame by the ring's policy.
-
-        Raises
-        ------
-        DeviceTimeout
-            No frame within ``timeout_s``.
-        DeviceDisconnected
-            The camera stopped answering its heartbeat, or was closed.
-        """
-        if self._closed:
-            raise DeviceDisconnected(self._name, "camera closed")
-        return self._ring.get(timeout_s, fail_after_loss=since_loss)
 
     def counters(self) -> GigECounters:
         """Frame counters over the camera's life and stream health (see :class:`GigECounters`)."""

@@ -6,8 +6,8 @@ packet format u8 (1 leader, 2 trailer, 3 data), packet id u24. The image leader 
 type 1, a 64-bit timestamp, the PFNC pixel format, width, height, offsets and padding.
 
 :class:`BlockAssembler` puts packets into place by id, whatever order they arrive in, asks for
-the missing ones (:attr:`Progress.resend`, for PACKETRESEND) once the trailer has come or the block
-has waited :attr:`BlockAssembler.resend_after_s`, gives a block up after
+the missing ones (:attr:`Progress.resend`, for PACKETRESEND) as soon as the trailer has come, or when
+the block has waited :attr:`BlockAssembler.resend_after_s` (also between rounds), gives a block up after
 :attr:`BlockAssembler.give_up_after_s` or as many resend rounds, and hands on only complete blocks:
 an image is never assembled from a block with a hole in it.
 
@@ -150,7 +150,7 @@ class BlockAssembler:
         When missing packets are asked for again, and when a block is given up.
     """
 
-    def __init__(self, device: str, data_size: int, max_payload: int, *, resend_after_s: float = 0.02,
+    def __init__(self, device: str, data_size: int, max_payload: int, *, resend_after_s: float = 0.05,
                  give_up_after_s: float = 0.5, max_resend_rounds: int = 3, max_blocks: int = 4) -> None:
         self._device = device
         self._data_size = data_size

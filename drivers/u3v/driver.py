@@ -148,11 +148,6 @@ class U3VCamera(GenICamCamera):
         return self._live().features
 
     @property
-    def name(self) -> str:
-        """Device name used in messages (vendor:product, model, serial)."""
-        return self._name
-
-    @property
     def connected(self) -> bool:
         """True while the connection is usable (not closed, not unplugged since it was opened)."""
         return not self._closed and self._disconnected is None and self._link is not None
@@ -203,32 +198,6 @@ class U3VCamera(GenICamCamera):
     def reading(self) -> bool:
         """True from :meth:`start` until :meth:`stop`, an unplug or too many stream errors (the thread stays)."""
         return self._reader is not None and self._reader.running
-
-    def loss_mark(self) -> int:
-        """Frames reported lost so far: take it before a trigger, pass it to :meth:`read_frame`."""
-        return self._ring.losses
-
-    def discard_pending(self) -> int:
-        """Drop the frames waiting in the ring (counted dropped); returns how many."""
-        return self._ring.discard_pending()
-
-    def read_frame(self, timeout_s: float, *, since_loss: int | None = None) -> Frame:
-        """The next frame by the ring's policy.
-
-        ``since_loss``: a :meth:`loss_mark`; a block the stream discarded since then raises
-        :class:`~wavestack.drivers.ring.FrameLost` at once (a triggered frame that will not come).
-
-        Raises
-        ------
-        DeviceTimeout
-            No frame within ``timeout_s`` (e.g. waiting for a trigger, or not started).
-        DeviceDisconnected
-            The camera was unplugged (after the pending frames are read) or closed (at once:
-            closing is final, frames still pending are not delivered).
-        """
-        if self._closed:
-            raise DeviceDisconnected(self._name, "camera closed")
-        return self._ring.get(timeout_s, fail_after_loss=since_loss)
 
     def counters(self) -> U3VCounters:
         """Frame counters over the camera's life, across reconnects, and stream health (see :class:`U3VCounters`)."""

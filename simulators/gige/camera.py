@@ -300,6 +300,7 @@ class SimulatedGigECamera:
             self.faults.oversized_packet = False
             order[1] = order[1] + bytes(_OVERSIZED - len(order[1]))
         self.counters["blocks"] += 1
+        self.counters["skipped"] += frame.skipped  # frames the free-run clock passed while this one was sent
         self._send(order, destination)
 
     def _send_resends(self) -> None:

@@ -24,6 +24,13 @@ FILE_TYPE_ZIP = 1
 CATEGORIES = ("DeviceControl", "ImageFormatControl", "AcquisitionControl", "TransportLayerControl")
 
 
+def child(parent: ET.Element, tag: str, text: str | None = None, **attrs: str) -> ET.Element:
+    """A new sub-element of ``parent`` with ``text`` and attributes."""
+    element = ET.SubElement(parent, tag, attrs)
+    element.text = text
+    return element
+
+
 def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FEATURES,
                 strings: tuple[StringFeatureSpec, ...] = DEVICE_STRINGS, *, big_endian: bool = False,
                 tooltip: str = "wavestack simulated USB3 Vision camera") -> bytes:
@@ -47,11 +54,6 @@ def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FE
         "xmlns": GENICAM_NAMESPACE, "xmlns:xsi": "http://www.w3.org/2001/XMLSchema-instance",
         "xsi:schemaLocation": f"{GENICAM_NAMESPACE} http://www.genicam.org/GenApi/GenApiSchema_Version_1_1.xsd",
     })
-
-    def child(parent: ET.Element, tag: str, text: str | None = None, **attrs: str) -> ET.Element:
-        element = ET.SubElement(parent, tag, attrs)
-        element.text = text
-        return element
 
     members = [(spec.category, spec.name) for spec in (*strings, *features)]
     categories = {"Root": [c for c in CATEGORIES if any(c == category for category, _ in members)]}
