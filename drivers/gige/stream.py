@@ -29,6 +29,23 @@ RECEIVE_BUFFER = 16 << 20  # a few 1024 x 1024 Mono12 images; the kernel may gra
 _POLL_S = 0.01
 
 
+def _grow_receive_buffer(sock: socket.socket, device: str) -> None:
+    """Ask for :data:`RECEIVE_BUFFER` bytes of kernel buffer, beyond ``net.core.rmem_max`` where allowed
+    (SO_RCVBUFFORCE needs CAP_NET_ADMIN); a smaller grant is logged, since a full buffer loses packets
+    that then cost resends."""
+    force = getattr(socket, "SO_RCVBUFFORCE", None)
+    try:
+        if force is None:
+            raise PermissionError
+        sock.setsockopt(socket.SOL_SOCKET, force, RECEIVE_BUFFER)
+    except OSError:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+    granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    if granted < RECEIVE_BUFFER:
+        logger.info("%s: stream receive buffer %d B (asked %d B; raise net.core.rmem_max for fewer resends)",
+                    device, granted, RECEIVE_BUFFER)
+
+
 class _BlockIds:
     """16-bit GVSP block ids (1..0xFFFF cyclic) to ids that only grow."""
 
@@ -85,7 +102,7 @@ class StreamReceiver:
         self._ready: dict[int, gvsp.Image] = {}  # complete images waiting for older blocks
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER)
+            _grow_receive_buffer(self._sock, device)
             self._sock.bind((bind_host, 0))
             self._sock.settimeout(_POLL_S)
         except OSError:
