@@ -37,10 +37,14 @@ def test_run_on_gige_gives_the_results_of_u3v_for_the_same_optic(tmp_path: Path,
     first_u3v, first_gige = np.array(u3v[0]["coefficients"]), np.array(gige[0]["coefficients"])
     # the first set is the same five frames of the same optic through either transport: the same bits
     np.testing.assert_allclose(first_gige, first_u3v, rtol=0, atol=1e-12)
+    assert u3v[0]["fitter"] == gige[0]["fitter"]
     for a, b in zip(u3v[:3], gige[:3]):
-        # later sets are other frames (other noise): both within the station's own truth check, and
-        # apart by no more than their errors against the truth allow (0.5e-3 waves rms each here)
+        # later sets are other frames (other noise), and a run may switch from the stand-in fitter to
+        # the aperture's CSF-QCM fitter one result earlier or later than the other (background build):
+        # both within the station's own truth check, and with the same fitter apart by no more than
+        # their errors against the truth allow (0.5e-3 waves rms each here)
         assert a["truth_error_rms"] < 1e-3 and b["truth_error_rms"] < 1e-3
-        assert np.sqrt(np.mean((np.array(a["coefficients"]) - np.array(b["coefficients"])) ** 2)) < 2e-3
+        if a["fitter"] == b["fitter"]:
+            assert np.sqrt(np.mean((np.array(a["coefficients"]) - np.array(b["coefficients"])) ** 2)) < 2e-3
     counters = gige[-1]["counters"]["frames"]
     assert counters["acquired"] == counters["processed"] + counters["dropped"] + counters["pending"]
