@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from wavestack.config import ConfigError, load_plc_config
-from wavestack.config.camera import CameraSimulatorSettings
+from wavestack.config.camera import CameraSettings, CameraSimulatorSettings
 from wavestack.config.hexapod_sim import HexapodSimulatorSettings
 from wavestack.config.pzt import PiezoSimulatorSettings
 from wavestack.config.simulated_bench import (
@@ -20,6 +20,7 @@ from wavestack.config.simulated_bench import (
 from wavestack.simulated import as_simulator, camera_settings, hexapod_settings, piezo_device, plc_layout
 from wavestack.simulators import SurfaceSettings
 from wavestack.simulators.bench import PiezoCoupling
+from wavestack.simulators.gige import GigESimSettings
 from wavestack.simulators.optic import ApertureShape, OpticSettings
 from wavestack.simulators.pi_gcs import HexapodSimSettings
 from wavestack.simulators.spots import LensletArraySettings
@@ -53,8 +54,10 @@ def test_the_simulators_own_checks_name_the_file_and_the_nested_table() -> None:
 
 
 def test_the_device_simulators_settings() -> None:
-    assert camera_settings(CameraSimulatorSettings()) == U3VSimSettings(
+    assert camera_settings(CameraSettings(), CameraSimulatorSettings()) == U3VSimSettings(
         serial="WS-SIM-0001", width=1024, height=1024, pixel_format="Mono12", frame_rate_hz=30.0, zipped_xml=False)
+    gige = camera_settings(CameraSettings(url="sim://gige"), CameraSimulatorSettings(serial="WS-SIM-0001-LONG-SERIAL"))
+    assert isinstance(gige, GigESimSettings) and gige.serial == "WS-SIM-0001-LONG-SERIAL"[:16] and gige.width == 1024
     assert hexapod_settings(HexapodSimulatorSettings()) == HexapodSimSettings()
     assert hexapod_settings(HexapodSimulatorSettings(axes=("X", "Y"), low_limits=(-4.0, -4.0), high_limits=(4.0, 4.0))
                             ).pivot is None  # no rotation axes, no pivot

@@ -18,13 +18,14 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from wavestack.config import ConfigError, PlcConfig
-from wavestack.config.camera import CameraSimulatorSettings
+from wavestack.config.camera import CameraSettings, CameraSimulatorSettings
 from wavestack.config.hexapod_sim import HexapodSimulatorSettings
 from wavestack.config.plc import MachineModelSettings, PlcSimulatorSettings
 from wavestack.config.pzt import PiezoSimulatorSettings
 from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality
 from wavestack.simulators.pi_gcs import HexapodSimSettings
 from wavestack.simulators.plc import MachineSimSettings, PlcSimLayout, PolishingMachine, PolishingStation, RemovalTarget
+from wavestack.simulators.gige import GigESimSettings
 from wavestack.simulators.u3v import U3VSimSettings
 
 __all__ = ["as_simulator", "camera_settings", "hexapod_settings", "machine_settings", "piezo_device", "plc_layout",
@@ -68,8 +69,11 @@ def as_simulator(value: Any, kind: type[T], *, source: str, table: str) -> T:
         raise ConfigError(f"{source}: [{table}] {error}") from None
 
 
-def camera_settings(sim: CameraSimulatorSettings) -> U3VSimSettings:
-    """The simulated USB3 Vision camera's power-on state."""
+def camera_settings(camera: CameraSettings, sim: CameraSimulatorSettings) -> U3VSimSettings | GigESimSettings:
+    """The simulated camera's power-on state, on the transport ``[camera] url`` names (``sim://u3v``, ``sim://gige``)."""
+    if camera.transport == "gige":
+        return GigESimSettings(serial=sim.serial[:16], width=sim.width, height=sim.height,
+                               pixel_format=sim.pixel_format, frame_rate_hz=sim.frame_rate_hz)
     return U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
                           frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml)
 

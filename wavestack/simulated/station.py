@@ -1,11 +1,12 @@
 """Start the simulated devices a station file's ``sim://`` URLs ask for, so nothing has to be launched by hand.
 
-The test optic and the USB3 Vision camera that looks at it (a pyusb backend), through an
-interferometer or behind a lenslet array for a Shack-Hartmann station; the MDT693B behind
+The test optic and the camera that looks at it (USB3 Vision through a pyusb backend, or GigE
+Vision on loopback), through an interferometer or behind a lenslet array for a Shack-Hartmann
+station; the MDT693B behind
 ``sim://mdt693b/NAME`` (wired to the camera, so the fringes move with its voltage); the polishing
 PLC on a free loopback port, with a polishing machine that polishes the optic's surface. The
 station's drivers then open them exactly as they open hardware: :func:`start_simulated_station`
-returns what they need (the camera's backend, the piezo's URL, the PLC's address) and the
+returns what they need (the camera's backend or URL, the piezo's URL, the PLC's address) and the
 simulators themselves (the bench holds the ground truth the tests and the truth check read).
 """
 
@@ -28,6 +29,7 @@ from wavestack.simulated.settings import (
 )
 from wavestack.simulators import attach_simulated_device, register_serial_simulators
 from wavestack.simulators.bench import PiezoCoupling, SimulatedInterferometer, SimulatedShackHartmann
+from wavestack.simulators.gige import SimulatedGigECamera
 from wavestack.simulators.optic import OpticSettings, TestOptic
 from wavestack.simulators.plc import PlcSimulator, PolishingMachine
 from wavestack.simulators.spots import LensletArraySettings, SpotRenderer
@@ -46,7 +48,9 @@ class SimulatedStation:
     Attributes
     ----------
     bench : SimulatedInterferometer or SimulatedShackHartmann or None
-        The simulated camera's bench (its ``backend`` for the camera driver, its ground truth).
+        The simulated camera's bench (its ``backend`` for a USB3 Vision driver, its ground truth).
+    camera_url : str or None
+        The GigE Vision URL of the bench's camera, started on loopback (``sim://gige``).
     piezo_url : str or None
         The URL the piezo driver opens (``sim://mdt693b/NAME``, the device attached under NAME).
     plc_simulator : PlcSimulator or None
@@ -54,6 +58,7 @@ class SimulatedStation:
     """
 
     bench: SimulatedBench | None = None
+    camera_url: str | None = None
     piezo_url: str | None = None
     plc_simulator: PlcSimulator | None = None
 
@@ -78,7 +83,8 @@ def simulated_interferometer(config: StationConfig) -> tuple[SimulatedInterferom
         assert config.pzt_simulator is not None
         device = piezo_device(config.pzt_simulator)
     coupling = as_simulator(config.bench, PiezoCoupling, source=config.source, table="bench")
-    bench = SimulatedInterferometer(_optic(config), camera_settings(config.camera_simulator), device, coupling)
+    bench = SimulatedInterferometer(_optic(config), camera_settings(config.camera, config.camera_simulator), device,
+                                    coupling)
     return bench, device
 
 
@@ -87,7 +93,7 @@ def _simulated_shack_hartmann(config: StationConfig) -> SimulatedShackHartmann:
     assert config.lenslets is not None  # required by parse_station_config
     lenslets = as_simulator(config.lenslets, LensletArraySettings, source=config.source, table="lenslets")
     spots = SpotRenderer(_optic(config), lenslets, sim.height, sim.width)
-    return SimulatedShackHartmann(spots, camera_settings(sim))
+    return SimulatedShackHartmann(spots, camera_settings(config.camera, sim))
 
 
 def _piezo_url(url: str, name: str) -> str:
@@ -134,6 +140,9 @@ def start_simulated_station(config: StationConfig, stack: ExitStack, *, name: st
             started.bench = _simulated_shack_hartmann(config)
         else:
             started.bench, device = simulated_interferometer(config)
+        if isinstance(started.bench.camera, SimulatedGigECamera):
+            stack.enter_context(started.bench.camera)
+            started.camera_url = started.bench.camera.url
     if config.pzt is not None and config.phase_stepping and config.pzt.url.startswith("sim://"):
         register_serial_simulators()
         if device is None:

@@ -21,6 +21,8 @@ from wavestack.config import StationConfig, build_calibration, build_piezo
 from wavestack.drivers.errors import DeviceDisconnected
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
+from wavestack.drivers.genicam.camera_verbs import GenICamCamera
+from wavestack.drivers.gige import GigECamera
 from wavestack.drivers.plc import CommandLimits, PolishingLink
 from wavestack.drivers.u3v import U3VCamera
 from wavestack.drivers.u3v.usb_tcp import UsbTcpBackend, parse_usbtcp_url
@@ -35,7 +37,7 @@ class StationDevices:
 
     Attributes
     ----------
-    camera : U3VCamera
+    camera : U3VCamera or GigECamera
     piezo : MDT693B or None
     calibration : PhaseStepCalibration or None
     link : PolishingLink or None
@@ -48,7 +50,7 @@ class StationDevices:
         Compares results with the simulator's truth, when the camera is simulated.
     """
 
-    camera: U3VCamera
+    camera: U3VCamera | GigECamera
     piezo: MDT693B | None = None
     calibration: PhaseStepCalibration | None = None
     link: PolishingLink | None = None
@@ -70,7 +72,7 @@ class StationDevices:
             return None
 
 
-def configure_camera(camera: U3VCamera, config: StationConfig) -> None:
+def configure_camera(camera: GenICamCamera, config: StationConfig) -> None:
     """Apply the configured pixel format, exposure and trigger mode (again after a reopen)."""
     timeout = config.camera.timeout_s
     if config.camera.pixel_format is not None:
@@ -142,12 +144,8 @@ def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder:
         simulated = start_simulated_station(config, stack, name=f"station-{id(devices):x}", job_folder=job_folder)
         devices.bench, devices.plc_simulator = simulated.bench, simulated.plc_simulator
     if devices.bench is not None:
-        camera = U3VCamera.open(backend=devices.bench.backend, timeout_s=timeout,
-                                ring_capacity=config.camera.ring_capacity)
         devices.truth_check = _truth_check(devices.bench, config)
-    else:
-        camera = U3VCamera.open(backend=_usb_backend(config.camera.url, stack), serial=config.camera.serial,
-                                timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
+    camera = _open_camera(config, simulated, stack)
     stack.callback(camera.close)
     configure_camera(camera, config)
     devices.camera = camera
@@ -175,6 +173,20 @@ def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder:
         link.self_check(timeout_s=max(timeout, link_settings.io_timeout_s * 4))
         devices.link = link
     return devices
+
+
+def _open_camera(config: StationConfig, simulated: Any, stack: ExitStack) -> U3VCamera | GigECamera:
+    """The station's camera on its transport: the simulated bench's (GigE on loopback, or its USB backend), or hardware."""
+    settings = config.camera
+    if simulated is not None and simulated.camera_url is not None:
+        return GigECamera.open(simulated.camera_url, timeout_s=settings.timeout_s, ring_capacity=settings.ring_capacity)
+    if settings.transport == "gige":
+        return GigECamera.open(settings.url, timeout_s=settings.timeout_s, ring_capacity=settings.ring_capacity)
+    if simulated is not None and simulated.bench is not None:
+        return U3VCamera.open(backend=simulated.bench.backend, timeout_s=settings.timeout_s,
+                              ring_capacity=settings.ring_capacity)
+    return U3VCamera.open(backend=_usb_backend(settings.url, stack), serial=settings.serial,
+                          timeout_s=settings.timeout_s, ring_capacity=settings.ring_capacity)
 
 
 def _any_simulated(config: StationConfig) -> bool:
