@@ -25,7 +25,7 @@ from wavestack.cli import main
 from wavestack.drivers.frames import Frame
 from wavestack.pipeline import InputError
 from wavestack.recording import RecordingDamaged, RecordingReader, RecordingWriter, check_recording_path
-from wavestack.recording.hdf5_open import lookup3
+from wavestack.pipeline.formats.hdf5_open import lookup3
 
 SHAPE = (8, 9)
 FPS = 2
@@ -215,7 +215,7 @@ def test_check_recording_path(tmp_path: Path) -> None:
     assert check_recording_path(existing, overwrite=True) == existing
 
 
-@pytest.mark.parametrize("name", ["wavestack.recording.hdf5_open", "wavestack.recording.paths"])
+@pytest.mark.parametrize("name", ["wavestack.pipeline.formats.hdf5_open", "wavestack.recording.paths"])
 def test_examples_run_and_match(name: str) -> None:
     module = importlib.import_module(name)
     tests = [test for test in doctest.DocTestFinder(exclude_empty=True).find(module, name) if test.examples]

@@ -27,7 +27,7 @@ from wavestack import __version__
 from wavestack.loop import MAP_KIND, read_campaign
 from wavestack.pipeline import InputError
 from wavestack.recording import FORMAT_NAME, RecordingReader
-from wavestack.recording.hdf5_open import open_hdf5_readonly
+from wavestack.pipeline.formats.hdf5_open import open_hdf5_readonly
 
 #: A block of a large recording holds at least this many sets: ~10 ms per set on the small
 #: station, so a task is ~0.5 s or more, against ~1 ms of scheduling per task.

@@ -22,7 +22,7 @@ which the reader names as incomplete. Append-only: a record that supersedes an e
 completed after it was handed off) is a new record with the same key, so a fault while writing
 never damages what was already on disk. The file is created exclusively (``w-``: an existing file
 is never overwritten) and flushed after every record; the reader opens it through
-:func:`~wavestack.recording.hdf5_open.open_hdf5_readonly` (never SWMR read mode, so a damaged or
+:func:`~wavestack.pipeline.formats.hdf5_open.open_hdf5_readonly` (never SWMR read mode, so a damaged or
 truncated file is an error at once, never a wait) and returns every intact record with the
 damaged ones named (:func:`read_campaign`).
 """
@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.pipeline import InputError
-from wavestack.recording.hdf5_open import open_hdf5_readonly
+from wavestack.pipeline.formats.hdf5_open import open_hdf5_readonly
 
 __all__ = ["CAMPAIGN_VERSION", "MAP_KIND", "CampaignEntry", "CampaignLog", "CampaignWriter", "read_campaign",
            "record_crc32"]

@@ -6,7 +6,7 @@ numbers, bools, strings and numeric arrays, so they do not know the station's re
 
 The work is split by concept: :mod:`wavestack.recording.format` (names, HDF5 layout, the
 result table, the checksums), :mod:`wavestack.recording.writer` (appending and the crash-safe
-commit protocol), :mod:`wavestack.recording.hdf5_open` (opening without SWMR read mode, which
+commit protocol), :mod:`wavestack.pipeline.formats.hdf5_open` (opening without SWMR read mode, which
 hung on damaged files), :mod:`wavestack.recording.reader` (reading committed rows back, reporting
 damage), :mod:`wavestack.recording.paths` (the ``--record`` path checked before devices open),
 :mod:`wavestack.recording.station_rows` (what the station writes: one fixed-shape row per

@@ -46,7 +46,7 @@ Three layers, because each misses something the others catch:
   ``layout_crc32`` is written when SWMR starts (both are known then), or at ``close``.
 
 A truncated file is also caught before any checksum: the reader compares every chunk's extent
-with the file's real size (see :func:`read_rows` and :mod:`wavestack.recording.hdf5_open`).
+with the file's real size (see :func:`read_rows` and :mod:`wavestack.pipeline.formats.hdf5_open`).
 
 A version 1 recording (no checksums) still reads: HDF5's metadata checksums and the reader's
 end-of-file check on every chunk still catch truncation, but a flipped pixel byte cannot be

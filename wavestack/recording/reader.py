@@ -2,7 +2,7 @@
 
 ``wavestack replay FILE.h5`` reads with :class:`RecordingReader`. The layout and its checksums are
 described in :mod:`wavestack.recording.format`, the commit protocol in
-:mod:`wavestack.recording.writer`, why no read can wait in :mod:`wavestack.recording.hdf5_open`.
+:mod:`wavestack.recording.writer`, why no read can wait in :mod:`wavestack.pipeline.formats.hdf5_open`.
 
 A malformed file (not HDF5, not a recording, a missing or mis-shaped dataset, a newer version, a
 damaged header) raises :class:`~wavestack.pipeline.InputError` naming the file and what was
@@ -38,7 +38,7 @@ from wavestack.recording.format import (
     read_rows,
     set_crc32,
 )
-from wavestack.recording.hdf5_open import open_hdf5_readonly
+from wavestack.pipeline.formats.hdf5_open import open_hdf5_readonly
 
 
 class RecordingDamaged(InputError):

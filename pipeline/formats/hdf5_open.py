@@ -1,4 +1,7 @@
-"""Open an HDF5 recording read-only without ever waiting: also one that is truncated or whose writer was killed.
+"""Open an HDF5 file read-only without ever waiting: also one that is truncated or whose writer was killed.
+
+Station recordings, campaign records and any other HDF5 file a reader must not hang on open
+through :func:`open_hdf5_readonly`.
 
 Why not SWMR read mode
 ----------------------
@@ -32,7 +35,7 @@ from typing import Final
 
 import h5py
 
-from wavestack.pipeline import InputError
+from .errors import InputError
 
 HDF5_SIGNATURE: Final = b"\x89HDF\r\n\x1a\n"
 _FLAGS_OFFSET: Final = 11  # signature (8), version, size of offsets, size of lengths, then the status flags
