@@ -2,31 +2,11 @@
 
 from __future__ import annotations
 
-import enum
 import threading
 from dataclasses import dataclass, field, replace
 
-from wavestack.loop import StateTable, Transitions, run_machine
-
-
-class Phase(enum.Enum):
-    A = "a"
-    B = "b"
-    DONE = "done"
-    FAULTED = "faulted"
-    INTERRUPTED = "interrupted"
-
-
-class Event(enum.Enum):
-    GO = "go"
-    FINISH = "finish"
-    FAULT = "fault"
-    STOP = "stop"
-
-
-TABLE = StateTable.build({(Phase.A, Event.GO): Phase.B, (Phase.B, Event.FINISH): Phase.DONE}, phases=Phase,
-                         terminal={Phase.DONE, Phase.FAULTED, Phase.INTERRUPTED}, faulted=Phase.FAULTED,
-                         interrupted=Phase.INTERRUPTED, fault=Event.FAULT, stop=Event.STOP)
+from loop_machine import TABLE, Event, Phase
+from wavestack.loop import Transitions, run_machine
 
 
 @dataclass(frozen=True)

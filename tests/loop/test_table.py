@@ -2,33 +2,12 @@
 
 from __future__ import annotations
 
-import enum
 import itertools
 
 import pytest
 
+from loop_machine import TABLE, TERMINAL, Event, Phase
 from wavestack.loop import StateTable
-
-
-class Phase(enum.Enum):
-    A = "a"
-    B = "b"
-    DONE = "done"
-    FAULTED = "faulted"
-    INTERRUPTED = "interrupted"
-
-
-class Event(enum.Enum):
-    GO = "go"
-    FINISH = "finish"
-    FAULT = "fault"
-    STOP = "stop"
-
-
-TERMINAL = {Phase.DONE, Phase.FAULTED, Phase.INTERRUPTED}
-TABLE = StateTable.build({(Phase.A, Event.GO): Phase.B, (Phase.B, Event.FINISH): Phase.DONE}, phases=Phase,
-                         terminal=TERMINAL, faulted=Phase.FAULTED, interrupted=Phase.INTERRUPTED, fault=Event.FAULT,
-                         stop=Event.STOP)
 
 
 @pytest.mark.parametrize(("phase", "event"), list(itertools.product(Phase, Event)))
