@@ -19,6 +19,7 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.aperture.region",  # Aperture.from_mask
     "wavestack.pipeline.fit.build",  # build_fitter
     "wavestack.pipeline.fit.annulus",  # annulus_obscuration
+    "wavestack.pipeline.fit.map_domain",  # map_domain
     "wavestack.pipeline.fit.run_fill",  # fitted_runs, fill_runs
     "wavestack.pipeline.fit.moment_chunks",  # ChunkedPass
     "wavestack.pipeline.fit.run_moments",  # RunPass
