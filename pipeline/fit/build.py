@@ -41,8 +41,7 @@ from .legendre_moments import MAX_AMPLIFICATION
 from .moment_build import MOMENT_METHODS, MomentRequest, build_moment_fitter
 from .operator_projection import OperatorProjection
 from .fitter import Fitter
-from .map_domain import map_domain
-from .methods import MAPPED_METHODS, METHODS, MappingOptions, Samples, method_columns
+from .methods import METHODS, MappingOptions, Samples, method_columns
 from .normal_equations import IllConditionedBasis, NormalEquations
 from .orthonormal import orthonormalise
 from .physical_terms import physical_term_basis, physical_term_names
@@ -357,8 +356,7 @@ def _build(
     timings = {"aperture": time.perf_counter() - started}
 
     tick = time.perf_counter()
-    domain = map_domain(aperture, fit_mask) if method in MAPPED_METHODS else aperture
-    columns = method_columns(method, domain, samples, mode_pairs, options, ratio)
+    columns = method_columns(method, aperture, samples, mode_pairs, options, ratio, fit_mask)
     timings["basis"] = time.perf_counter() - tick
     if columns.mapping is not None:
         timings.update({f"map_{stage}": seconds for stage, seconds in columns.mapping.timings.items()})
