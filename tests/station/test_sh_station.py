@@ -158,9 +158,9 @@ def test_auto_finds_the_simulated_array(path: Path, kind: str) -> None:
 @pytest.mark.parametrize("path, kind", [(SH_SMALL, "square"), (SH_SMALL_HEX, "hexagonal")])
 def test_recorded_frames_give_the_same_coefficients_through_analyze(path: Path, kind: str, tmp_path: Path,
                                                                     capsys) -> None:
-    """``run --record`` and ``analyze --config STATION.toml SPOTS`` on the same frame: one processor,
-    the same coefficients (float64 through both; 1e-9 waves allows for nothing but the order of
-    float operations, and there is none: the same code runs on the same pixels)."""
+    """``run --record``, ``analyze --config STATION.toml SPOTS`` on each recorded frame and ``replay``:
+    one processor, the same coefficients (float64 throughout; 1e-9 waves allows for nothing but the
+    order of float operations, and there is none: the same code runs on the same pixels)."""
     recording = tmp_path / "run.h5"
     completed = subprocess.run(
         [sys.executable, "-m", "wavestack.cli", "run", "--config", str(path), "--frames", "3", "--record",
@@ -178,6 +178,14 @@ def test_recorded_frames_give_the_same_coefficients_through_analyze(path: Path, 
             recorded = np.asarray(results["coefficients"][row])
             assert results["valid"][row] and analysed["lattice"]["kind"] == kind
             assert np.abs(np.array(analysed["coefficients_waves"]) - recorded).max() <= 1e-9
+    # and replay runs the same processor over the whole recording
+    assert main(["replay", str(recording), "--json"]) == 0
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    replayed = [line for line in lines if line["type"] == "result"]
+    assert len(replayed) == 3 and all(line["valid"] and line["fitter"] == "modal" for line in replayed)
+    assert max(line["difference_rms"] for line in replayed) <= 1e-9
+    assert main(["replay", str(recording)]) == 0
+    assert capsys.readouterr().out.count("valid, fitter modal, differs from the recording by") == 3
 
 
 def _residual_of(sensor: ShackHartmannSettings, lenslets: LensletSlopes, coefficients: object) -> tuple[float, float]:
