@@ -28,6 +28,8 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
     "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice
     "wavestack.pipeline.shack_hartmann.lattice_detection",  # detect_lattice
+    "wavestack.pipeline.shack_hartmann.lit",  # lit_lenslets
+    "wavestack.pipeline.instrument.shack_hartmann",  # ShackHartmannProcessor
     "wavestack.pipeline.formats.fourd",  # read_4d
     "wavestack.pipeline.formats.measured",  # read_measured_map
     "wavestack.pipeline.polishing.tif",  # ToolInfluence
