@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -219,3 +220,13 @@ def test_a_real_hexagonal_sensor(capsys, tmp_path) -> None:
     assert report["condition"] < 2.0  # 127 lenslets over the disk they cover: 15 modes well apart
     found = detect_lattice(cv2.imread(str(frames["img"]), cv2.IMREAD_UNCHANGED))
     assert found.kind == "hexagonal" and found.count == 127  # the aberrated frame alone too
+
+
+def test_the_config_describes_the_sensor_alone(capsys, sensor) -> None:
+    folder, *_ = sensor
+    station = Path(__file__).resolve().parents[1] / "configs" / "sh-small.toml"
+    one_line_error(capsys, [str(folder / "spots.png"), "--config", str(station), "--reference",
+                            str(folder / "reference.png")], "spots.png", "--config describes the sensor", "--reference")
+    interferometer = Path(__file__).resolve().parents[1] / "configs" / "station-small.toml"
+    one_line_error(capsys, [str(folder / "spots.png"), "--config", str(interferometer)], "station-small.toml",
+                   "kind = 'interferometer'", "Shack-Hartmann station file")

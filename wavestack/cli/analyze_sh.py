@@ -135,8 +135,8 @@ def _processor(path: Path, args: argparse.Namespace, reference: np.ndarray | Non
     if args.config is not None:
         config = load_station_config(args.config)
         if config.station.kind != "shack-hartmann":
-            raise InputError(f"{args.config}: a {config.station.kind} station; a spot image needs a [station] "
-                             f"kind = 'shack-hartmann' file")
+            raise InputError(f"{args.config}: [station] kind = '{config.station.kind}'; analyze --config with a "
+                             f"spot image expects a Shack-Hartmann station file (kind = 'shack-hartmann')")
         processor = build_processor(config)
         assert isinstance(processor, ShackHartmannProcessor)
         return processor
