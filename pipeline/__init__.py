@@ -10,7 +10,9 @@ face, stacked so that a lower topic never imports a higher one:
 * then :mod:`~wavestack.pipeline.phase` (PSI, carrier, unwrapping, the measured wavefront, units);
 * then :mod:`~wavestack.pipeline.mapping` (meshes, Laplacians, CSF, QCM and conformal maps);
 * then :mod:`~wavestack.pipeline.fit` (methods, building, the fitter, its store) and
-  :mod:`~wavestack.pipeline.shack_hartmann` (grid, centroids, slopes, reconstruction);
+  :mod:`~wavestack.pipeline.shack_hartmann` (the lenslet lattice, centroids, slopes, reconstruction);
+* on top, :mod:`~wavestack.pipeline.instrument` (one processor per instrument kind, the signal
+  path every command calls: ``process(frames) -> outcome``);
 * beside them, needing nothing but the root: :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
   dwell grid and surface extension, dwell-time solvers).
 
@@ -101,11 +103,19 @@ from .polishing import (
 )
 from .shack_hartmann import (
     Centroider,
-    LensletGrid,
+    LensletLattice,
     ModalReconstructor,
     SpotMeasurement,
     convert_slopes,
+    detect_lattice,
+    lit_lenslets,
     slopes,
+)
+from .instrument import (
+    LensletSlopes,
+    ShackHartmannProcessor,
+    ShackHartmannSetup,
+    SlopeOutcome,
 )
 from .zernike import (
     ConicTest,
@@ -140,7 +150,7 @@ __all__ = [
     "mapped_columns",
     "build_canonical_map",
     "Centroider",
-    "LensletGrid",
+    "LensletLattice",
     "SpotMeasurement",
     "convert_slopes",
     "slopes",
@@ -242,4 +252,10 @@ __all__ = [
     "residual_after",
     "solve_dwell_fft",
     "solve_dwell_lsq",
+    "detect_lattice",
+    "lit_lenslets",
+    "LensletSlopes",
+    "ShackHartmannProcessor",
+    "ShackHartmannSetup",
+    "SlopeOutcome",
 ]

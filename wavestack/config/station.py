@@ -26,9 +26,10 @@ Tables (see ``wavestack/config/default.toml``, the simulated station ``wavestack
     defaults to ``[station] wavelength_nm`` and must equal it when given.
 ``[lenslets]``
     The simulated lenslet array (:class:`~wavestack.simulators.spots.LensletArraySettings`) of a
-    simulated Shack-Hartmann camera. ``pitch_px``, ``offset_px`` and ``grid_shape`` default to
-    the ``[shack_hartmann]`` values, ``gain_px`` to ``f lambda / p**2`` from them and the
-    wavelength, ``bit_depth`` to the simulated camera's pixel format.
+    simulated Shack-Hartmann camera. ``pitch_px``, ``offset_px``, ``grid_shape``,
+    ``orientation_deg`` and ``lattice`` default to the ``[shack_hartmann]`` values (``lattice``
+    must be given when the sensor's is ``"auto"``), ``gain_px`` to ``f lambda / p**2`` from them
+    and the wavelength, ``bit_depth`` to the simulated camera's pixel format.
 """
 
 from __future__ import annotations
@@ -185,8 +186,13 @@ def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: Stat
     try:
         parsed = parse_section(LensletArraySettings, table, source=source, section="lenslets")
         given = set(table)
-        derived: dict[str, Any] = {name: getattr(sensor, name) for name in ("pitch_px", "offset_px", "grid_shape")
-                                   if name not in given}
+        derived: dict[str, Any] = {name: getattr(sensor, name) for name in ("pitch_px", "offset_px", "grid_shape",
+                                                                           "orientation_deg") if name not in given}
+        if "lattice" not in given:
+            if sensor.lattice == "auto":
+                raise ConfigError(f"{source}: [lenslets] lattice: the simulated array's kind ('square' or "
+                                  f"'hexagonal') is needed when [shack_hartmann] lattice = 'auto'")
+            derived["lattice"] = sensor.lattice
         if "gain_px" not in given:
             derived["gain_px"] = sensor.gain_px(station.wavelength_nm)
         if "bit_depth" not in given:

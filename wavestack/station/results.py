@@ -11,44 +11,8 @@ import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Union
 
+from wavestack.pipeline.instrument import ApertureRecord, ReconstructorDiagnostics
 from wavestack.station.counters import Counters
-
-
-@dataclass(frozen=True)
-class ApertureRecord:
-    """The aperture a result was measured on.
-
-    Attributes
-    ----------
-    id : int or None
-        Counted per run from 0 (interferometer: per aperture; Shack-Hartmann: per lit-lenslet set).
-    changed : bool
-        This set started it.
-    topology : str
-        A one-line description (interferometer: the aperture's topology and pixel count).
-    valid_pixels : int
-    components : int or None
-        Interferometer: connected components of the aperture.
-    valid_lenslets : int or None
-        Shack-Hartmann: lit lenslets used.
-    """
-
-    id: int | None
-    changed: bool
-    topology: str
-    valid_pixels: int
-    components: int | None = None
-    valid_lenslets: int | None = None
-
-    def to_json(self) -> dict[str, object]:
-        """The record's keys as the JSON lines carry them (absent optional figures left out)."""
-        record: dict[str, object] = {"id": self.id, "changed": self.changed, "topology": self.topology}
-        if self.components is not None:
-            record["components"] = self.components
-        if self.valid_lenslets is not None:
-            record["valid_lenslets"] = self.valid_lenslets
-        record["valid_pixels"] = self.valid_pixels
-        return record
 
 
 @dataclass(frozen=True)
@@ -58,18 +22,6 @@ class FitDiagnostics:
     gram_condition: float | None
     flips: int | None
     max_beltrami: float | None
-
-    def to_json(self) -> dict[str, object]:
-        return asdict(self)
-
-
-@dataclass(frozen=True)
-class ReconstructorDiagnostics:
-    """A Shack-Hartmann modal reconstructor's figures: condition number, lit and pupil lenslets."""
-
-    condition: float
-    lit_lenslets: int
-    pupil_lenslets: int
 
     def to_json(self) -> dict[str, object]:
         return asdict(self)

@@ -3,7 +3,7 @@
 One pipeline thread (the caller's) takes the newest set from the source and runs one cycle, one
 way, one value per arrow: the processor (a
 :class:`~wavestack.station.interferometer.SetProcessor` for an interferometer, a
-:class:`~wavestack.station.shack_hartmann.SlopeProcessor` for a Shack-Hartmann sensor) returns a
+:class:`~wavestack.pipeline.instrument.ShackHartmannProcessor` for a Shack-Hartmann sensor) returns a
 frozen outcome; :func:`~wavestack.station.cycle.make_result` makes the
 :class:`~wavestack.station.results.StationResult`; the output stage sends it through the safety
 stage to the PLC (with a heartbeat each cycle, so a stalled pipeline is a dead host to the PLC's
@@ -50,7 +50,7 @@ from wavestack.station.heap import HeapRelease
 from wavestack.station.latency import LatencyHistogram
 from wavestack.station.outputs import PlcOutput
 from wavestack.station.results import StationResult, json_ready
-from wavestack.station.shack_hartmann import SlopeOutcome, SlopeProcessor
+from wavestack.pipeline.instrument import ShackHartmannProcessor, SlopeOutcome
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 
 logger = logging.getLogger(__name__)
@@ -328,12 +328,12 @@ class Station:
                            if self._output is not None else None)
 
 
-def build_processor(config: StationConfig, *, background_builds: bool = True) -> SetProcessor | SlopeProcessor:
+def build_processor(config: StationConfig, *, background_builds: bool = True) -> SetProcessor | ShackHartmannProcessor:
     """The processor of a station's kind: phase maps and fits, or Shack-Hartmann slopes.
 
     ``background_builds=False`` builds fitters synchronously (replay, benchmarks of the stages).
     """
     if config.station.kind == "shack-hartmann":
         assert config.shack_hartmann is not None  # parse_station_config requires [shack_hartmann]
-        return SlopeProcessor(config.shack_hartmann, wavelength_nm=config.station.wavelength_nm)
+        return ShackHartmannProcessor(config.shack_hartmann.setup(config.station.wavelength_nm))
     return SetProcessor(config.processing, background_builds=background_builds)
