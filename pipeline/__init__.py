@@ -12,7 +12,9 @@ face, stacked so that a lower topic never imports a higher one:
 * then :mod:`~wavestack.pipeline.fit` (methods, building, the fitter, its store) and
   :mod:`~wavestack.pipeline.shack_hartmann` (grid, centroids, slopes, reconstruction);
 * beside them, needing nothing but the root: :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
-  dwell grid and surface extension, dwell-time solvers).
+  dwell grid and surface extension, dwell-time solvers);
+* on top: :mod:`~wavestack.pipeline.surface` (ISO form figures and tolerances, PVr, PSD, slope,
+  areal filters: the figures a drawing tolerances).
 
 Private pieces shared across topics live at this root (``_angles``, ``_checks``).
 """
@@ -106,6 +108,23 @@ from .shack_hartmann import (
     SpotMeasurement,
     convert_slopes,
     slopes,
+)
+from .surface import (
+    ArealFilter,
+    FormAnalyzer,
+    FormFigures,
+    FormTolerance,
+    RobustPVAnalyzer,
+    SurfaceAnalyzer,
+    SurfaceFigures,
+    SurfaceRequest,
+    ToleranceError,
+    filter_surface,
+    measured_area,
+    parse_areal_filter,
+    parse_form_tolerance,
+    slope_maps,
+    surface_psd,
 )
 from .zernike import (
     ConicTest,
@@ -242,4 +261,19 @@ __all__ = [
     "residual_after",
     "solve_dwell_fft",
     "solve_dwell_lsq",
+    "ArealFilter",
+    "FormAnalyzer",
+    "FormFigures",
+    "FormTolerance",
+    "RobustPVAnalyzer",
+    "SurfaceAnalyzer",
+    "SurfaceFigures",
+    "SurfaceRequest",
+    "ToleranceError",
+    "filter_surface",
+    "measured_area",
+    "parse_areal_filter",
+    "parse_form_tolerance",
+    "slope_maps",
+    "surface_psd",
 ]
