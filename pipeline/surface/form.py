@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..fit import physical_term_basis
 from .area import MeasuredArea
 from .fringes import fringe_nm
-from .radial import RadialModel
+from .radial import MAX_CONDITION, RadialModel
 
 __all__ = ["FormAnalyzer", "FormFigures"]
 
@@ -94,7 +94,15 @@ class FormAnalyzer:
     radial_intervals : int
         Knot intervals of the rotationally symmetric profile (:class:`.radial.RadialModel`).
     asymmetric_order : int
-        Highest radial order of the asymmetric terms fitted with it.
+        Highest radial order of the asymmetric terms fitted with it (lowered where the
+        measured area cannot tell them from a radial profile: :mod:`.radial`).
+    max_condition : float
+        The radial model's bound on its condition number.
+
+    Attributes
+    ----------
+    asymmetric_order : int
+        The order the radial model uses on this area.
 
     Raises
     ------
@@ -116,15 +124,19 @@ class FormAnalyzer:
     (100.0, 0.0, 40)
     """
 
-    def __init__(self, area: MeasuredArea, *, radial_intervals: int = 32, asymmetric_order: int = 6) -> None:
+    def __init__(self, area: MeasuredArea, *, radial_intervals: int = 32, asymmetric_order: int = 6,
+                 max_condition: float = MAX_CONDITION) -> None:
         x, y = area.coordinates()
         needed = 4 * (radial_intervals + 3 + asymmetric_order * (asymmetric_order + 3) // 2)
         if area.pixels < needed:
             raise ValueError(f"valid: {area.pixels} measured pixels cannot determine the form figures; expected "
                              f"at least {needed} (fewer radial intervals or a lower asymmetric order need fewer)")
         self.area = area
-        self._sphere_q, self._sphere_r = np.linalg.qr(physical_term_basis(x, y, "pttp"))
-        self._radial = RadialModel(x, y, intervals=radial_intervals, asymmetric_order=asymmetric_order)
+        q, self._sphere_r = np.linalg.qr(physical_term_basis(x, y, "pttp"))
+        self._sphere_qt = np.ascontiguousarray(q.T)  # (4, N): one pass over the pixels per product
+        self._radial = RadialModel(x, y, intervals=radial_intervals, asymmetric_order=asymmetric_order,
+                                   max_condition=max_condition)
+        self.asymmetric_order = self._radial.asymmetric_order
 
     def figures(self, surface_nm: ArrayLike) -> FormFigures:
         """The form figures of a surface.
@@ -157,10 +169,10 @@ class FormAnalyzer:
         the values less their best-fit sphere, the sagitta the sphere's power at the test area's
         radius (all in the values' units).
         """
-        q = self._sphere_q
-        projected = q.T @ values
-        deviation = values - q[:, :3] @ projected[:3]
-        irregularity = deviation - q[:, 3] * projected[3]
+        qt = self._sphere_qt
+        projected = qt @ values
+        deviation = values - projected[:3] @ qt[:3]
+        irregularity = deviation - projected[3] * qt[3]
         power = float(np.linalg.solve(self._sphere_r, projected)[3])
         return deviation, irregularity, power
 

@@ -7,9 +7,11 @@ fit is least squares over the measured pixels themselves, on the circle that enc
 piston and tilt (positioning) are removed; the PV of the fitted surface is taken over the same
 pixels. (prysm's ``pvr()`` refuses non-square data and evaluates its fit on a grid of its own.)
 
-The fit is the project's fitter (``build_fitter``, circle method, Fringe ordering), built once
-per measured area; every command that reports PVr (analyze, fit, the station, polishing) calls
-:class:`RobustPVAnalyzer` for it.
+The fit is the project's fitter (``build_fitter``, the 36 Fringe terms over the enclosing
+circle orthonormalised on the measured pixels: method ``qr``, whose fitted surface is the
+circle polynomials' least-squares fit however poorly they are conditioned on the area, e.g. a
+long strip), built once per measured area; every command that reports PVr (analyze, fit, the
+station, polishing) calls :class:`RobustPVAnalyzer` for it.
 
 References
 ----------
@@ -78,7 +80,7 @@ class RobustPVAnalyzer:
 
     def __init__(self, area: MeasuredArea) -> None:
         self.area = area
-        self._fitter = build_fitter(Aperture.from_mask(area.valid), method="circle", modes=PVR_MODES,
+        self._fitter = build_fitter(Aperture.from_mask(area.valid), method="qr", modes=PVR_MODES,
                                     ordering="fringe", pupil=area.pupil, dtype=np.float64, remove="ptt")
 
     def measure(self, surface: ArrayLike) -> RobustPV:
