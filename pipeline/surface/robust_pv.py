@@ -96,8 +96,8 @@ class RobustPVAnalyzer:
         ValueError
             If the map's shape differs from the area's or a measured pixel is not finite.
         """
-        values = self.area.scatter(self.area.values(surface))
-        result = self._fitter.fit(values)
+        self.area.values(surface)  # every measured pixel finite, the shape the area's
+        result = self._fitter.fit(np.asarray(surface))  # the fitter reads the measured pixels only
         fitted = self._fitter.surface(result.coefficients)
         fit_pv = float(np.nanmax(fitted) - np.nanmin(fitted))
         return RobustPV(pvr=fit_pv + 3.0 * result.residual_rms, fit_pv=fit_pv, residual_rms=result.residual_rms)
