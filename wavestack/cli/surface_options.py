@@ -20,10 +20,12 @@ from wavestack.pipeline import InputError, SurfaceAnalyzer, SurfaceFigures, Surf
 from wavestack.pipeline import parse_areal_filter, parse_form_tolerance
 from wavestack.pipeline.surface import ArealFilter, FormTolerance
 
-__all__ = ["add_surface_arguments", "measure_surface", "surface_lines", "surface_request", "wants_surface"]
+__all__ = ["add_surface_arguments", "measure_surface", "surface_lines", "surface_request", "tolerance_argument",
+           "wants_surface"]
 
 
-def _tolerance(text: str) -> FormTolerance:
+def tolerance_argument(text: str) -> FormTolerance:
+    """An argparse type: the drawing's tolerance, or the parser's one-line error with the reason."""
     try:
         return parse_form_tolerance(text)
     except ToleranceError as error:
@@ -61,7 +63,7 @@ def _length(text: str) -> float:
 def add_surface_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the surface-figure options."""
     group = parser.add_argument_group("surface figures (ISO 10110-5 / 14999-4, PVr, PSD, slope, filters)")
-    group.add_argument("--spec", type=_tolerance, metavar="TOLERANCE",
+    group.add_argument("--spec", type=tolerance_argument, metavar="TOLERANCE",
                        help="the drawing's form tolerance, e.g. '3/2(0.5/0.2)' or '3/-(-/-; RMSi < 0.05)' "
                             "(fringes at 546.07 nm unless 'lambda = ... nm' follows): pass/fail per quantity")
     group.add_argument("--psd", action="store_true",
