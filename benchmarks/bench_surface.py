@@ -190,7 +190,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=8)
     parser.add_argument("--blocks", type=int, default=4)
     parser.add_argument("--block", type=int, default=20)
-    parser.add_argument("--max-pixels", type=int, default=40000)
+    parser.add_argument("--max-pixels", type=int, default=20000)
     parser.add_argument("--spectra-every", type=int, default=10)
     parser.add_argument("--skip", nargs="*", default=[], choices=("accuracy", "costs", "live"))
     args = parser.parse_args()
