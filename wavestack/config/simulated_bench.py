@@ -85,6 +85,8 @@ class LensletSimulatorSettings:
     pitch_px: float = setting(25.0, minimum=4.0, doc="lenslet pitch on the camera, pixels")
     offset_px: tuple[float, float] = setting((0.0, 0.0), minimum=-0.5, doc="corner of lenslet (0, 0), (col, row)")
     grid_shape: tuple[int, int] | None = setting(None, minimum=1, doc="(rows, cols); default: as many as fit")
+    lattice: Literal["square", "hexagonal"] = "square"
+    orientation_deg: float = setting(0.0, doc="angle of the lenslet rows from the camera's columns, degrees")
     gain_px: float = setting(100.0, minimum=0.0, doc="spot shift per wave per pixel of slope, pixels")
     spot_sigma_px: float = setting(1.5, minimum=0.0)
     spot_peak: float = setting(0.5, minimum=0.0, doc="fraction of full scale")

@@ -16,6 +16,7 @@ from wavestack.config.pzt import PiezoSettings, PiezoSimulatorSettings
 from wavestack.config.schema import setting
 from wavestack.config.shack_hartmann import ShackHartmannSettings
 from wavestack.config.simulated_bench import BenchSimulatorSettings, LensletSimulatorSettings, OpticSimulatorSettings
+from wavestack.config.surface import SurfaceSettings
 
 __all__ = ["OutputSettings", "StationConfig", "StationSettings"]
 
@@ -73,6 +74,7 @@ class StationConfig:
     bench: BenchSimulatorSettings
     shack_hartmann: ShackHartmannSettings | None = None
     lenslets: LensletSimulatorSettings | None = None
+    surface: SurfaceSettings = SurfaceSettings()
 
     @property
     def phase_stepping(self) -> bool:

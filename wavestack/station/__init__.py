@@ -1,8 +1,8 @@
 """The live station and the service the loops stand on: sources, devices, the result loop, outputs, sinks.
 
 A cycle runs one way, one value per arrow: frames -> a processor's frozen outcome
-(:class:`InterferometerOutcome` or :class:`SlopeOutcome`) -> :func:`make_result` (pure) -> the
-output stage (the PLC), which returns an :class:`OutputRecord` -> one :class:`CycleRecord` for
+(:class:`InterferometerOutcome` or :class:`~wavestack.pipeline.instrument.SlopeOutcome`) -> :func:`make_result`
+(pure) -> the output stage (the PLC), which returns an :class:`OutputRecord` -> one :class:`CycleRecord` for
 every sink.
 
 The service the applications (``polish``, ``align``, ``batch``) use: :class:`StationService`
@@ -42,27 +42,20 @@ from wavestack.station.results import (
     json_ready,
 )
 from wavestack.station.set_batch import GROUP_SETS, SetBatch
-from wavestack.station.shack_hartmann import (
-    MODAL,
-    LensletSlopes,
-    SlopeOutcome,
-    SlopeProcessor,
-    coefficient_errors,
-    pupil_lenslets,
-)
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 from wavestack.station.service import StationService
 from wavestack.station.station import Station, StationSummary, build_processor
-from wavestack.station.truth import TruthCheck
+from wavestack.station.truth import TruthCheck, coefficient_errors
 
 __all__ = [
     "ApertureAction", "ApertureEvent", "AperturePhase", "ApertureRecord", "ApertureState", "CARRIER_REFRESH_SETS",
     "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
-    "FitterChoice", "FitterDiagnostics", "FrameCounts", "GROUP_SETS", "Heartbeat", "InterferometerOutcome", "LensletSlopes",
-    "LiveMaps", "LiveSnapshot", "LiveStats", "MODAL", "MapSample", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet", "ProcessorOutcome",
-    "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetBatch", "SetCounts", "SetProcessor",
-    "SlopeOutcome", "SlopeProcessor", "Station", "StationDevices", "StationResult", "StationService",
-    "StationSummary", "TruthCheck", "TruthErrors", "UntrustedMeasurement", "build_processor", "coefficient_errors", "configure_camera", "confirm", "counter_lines",
-    "json_ready", "make_result", "sample_of", "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view",
+    "FitterChoice", "FitterDiagnostics", "FrameCounts", "GROUP_SETS", "Heartbeat", "InterferometerOutcome",
+    "LiveMaps", "LiveSnapshot", "LiveStats", "MapSample", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet",
+    "ProcessorOutcome", "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetBatch", "SetCounts",
+    "SetProcessor", "Station", "StationDevices", "StationResult", "StationService", "StationSummary", "TruthCheck",
+    "TruthErrors", "UntrustedMeasurement", "build_processor", "coefficient_errors", "configure_camera", "confirm",
+    "counter_lines", "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "render_live_view",
+    "sample_of",
     "start_up_hold", "with_output",
 ]
