@@ -31,7 +31,8 @@ from polishing_stations import polishing_config, polishing_session, run_campaign
 from shared_data import DATA, require_shared_data
 from wavestack.config.polishing import parse_polishing_config
 from wavestack.drivers.plc import job_file_name
-from wavestack.polish.measurement import remove_ptt, surface_stats
+from wavestack.pipeline import remove_physical_terms
+from wavestack.polish.measurement import surface_stats
 from wavestack.polish.recorder import read_polish_campaign
 from wavestack.simulators.plc.job_file import read_job_file
 from wavestack.simulators.plc.machine_tif import GaussianTool
@@ -73,10 +74,10 @@ def check_runs(session, summary, record: Path) -> list[float]:
     for k, row in enumerate(summary.runs):
         removal, variance = machine[k]
         host_removal = before[k] - predicted[k]  # the predicted residual is the measurement less the host's removal
-        departure, _ = surface_stats(remove_ptt(removal - host_removal, mask), mask)
+        departure, _ = surface_stats(remove_physical_terms(removal - host_removal, mask, "ptt")[0], mask)
         expected = math.sqrt(departure**2 + float(np.mean(variance[mask])) + noise_nm**2 + noise[k] ** 2
                              + noise[k + 1] ** 2)
-        achieved, _ = surface_stats(remove_ptt(after[k] - predicted[k], mask), mask)
+        achieved, _ = surface_stats(remove_physical_terms(after[k] - predicted[k], mask, "ptt")[0], mask)
         print(f"run {row.run}: before {row.rms_before_nm:.2f} predicted {row.predicted_rms_nm:.2f} measured "
               f"{row.measured_rms_nm:.2f} nm (loop's floor {row.floor_nm:.2f}); measured - predicted {achieved:.2f} nm "
               f"RMS; machine departure {departure:.2f}, efficiency {math.sqrt(np.mean(variance[mask])):.2f}, noise "

@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
 
-from fuzz import fuzz_settings
-from wavestack.polish.measurement import ApertureKey, average_surface, remove_ptt, surface_stats
+from wavestack.pipeline import remove_physical_terms
+from wavestack.polish.measurement import ApertureKey, average_surface, surface_stats
 from wavestack.station import MapSample, UntrustedMeasurement
 
 SHAPE = (48, 48)
@@ -36,7 +34,7 @@ def test_units_are_nm_of_surface_and_ptt_is_removed() -> None:
     shape_waves = 0.1 * _astig(mask)
     tilted = shape_waves + 0.3 + 0.01 * rows - 0.02 * cols  # piston and tilt the loop must not polish
     m = average_surface([_sample(tilted, mask)] * 3, wavelength_nm=632.8, reflection_factor=2.0, min_count=3)
-    expected = remove_ptt(shape_waves * 632.8 / 2.0, mask)
+    expected, _ = remove_physical_terms(shape_waves * 632.8 / 2.0, mask, "ptt")
     np.testing.assert_allclose(m.surface_nm[mask], expected[mask], atol=1e-9)
     assert np.all(np.isnan(m.surface_nm[~mask]))
     rms, pv = surface_stats(expected, mask)
@@ -93,26 +91,6 @@ def test_refusals_name_the_problem(problem: str) -> None:
     if problem not in ("too-few",):  # the same call on the clean samples is trusted
         clean = [_sample(waves, mask, t_ns=100 + i) for i in range(4)]
         assert average_surface(clean, **kwargs).count == 4
-
-
-@fuzz_settings(200)
-@given(st.integers(3, 30), st.integers(3, 30), st.floats(-5, 5), st.floats(-1, 1), st.floats(-1, 1),
-       st.integers(0, 2**32 - 1))
-def test_remove_ptt_removes_exactly_a_plane(h: int, w: int, piston: float, tip: float, tilt: float,
-                                            seed: int) -> None:
-    rng = np.random.default_rng(seed)
-    mask = rng.random((h, w)) < 0.7
-    rows, cols = np.nonzero(mask)
-    if rows.size < 3 or np.linalg.matrix_rank(np.column_stack([np.ones(rows.size), rows, cols])) < 3:
-        return
-    surface = rng.normal(size=(h, w))
-    r, c = np.mgrid[0:h, 0:w]
-    once = remove_ptt(surface, mask)
-    again = remove_ptt(surface + piston + tip * r + tilt * c, mask)
-    np.testing.assert_allclose(once[mask], again[mask], atol=1e-8)
-    # what is left is orthogonal to the plane
-    design = np.column_stack([np.ones(rows.size), rows, cols])
-    np.testing.assert_allclose(design.T @ once[mask], 0.0, atol=1e-8)
 
 
 def test_aperture_key_tells_masks_apart() -> None:

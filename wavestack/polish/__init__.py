@@ -11,7 +11,7 @@ station, the solver and the machine through them (:mod:`.loop`, on the kernel's 
 from __future__ import annotations
 
 from wavestack.polish.job_checks import JobRules, JobUnsafe, check_job
-from wavestack.polish.measurement import ApertureKey, Measurement, average_surface, remove_ptt, surface_stats
+from wavestack.polish.measurement import ApertureKey, Measurement, average_surface, surface_stats
 from wavestack.polish.history import campaign_history
 from wavestack.polish.recorder import CampaignRecorder, PolishCampaign, read_polish_campaign
 from wavestack.polish.run_record import RunMaps, RunRecord, run_finished, run_line, run_started
@@ -30,6 +30,6 @@ from wavestack.polish.state import (
 __all__ = [
     "ApertureKey", "CampaignRecorder", "JobRules", "JobUnsafe", "LoopEvent", "LoopPhase", "LoopState", "Measurement",
     "PolishCampaign", "RunMaps", "RunRecord", "TABLE", "TERMINAL_PHASES", "TRANSITIONS", "advance", "average_surface",
-    "campaign_history", "check_job", "judge_job", "judge_measurement", "read_polish_campaign", "remove_ptt",
+    "campaign_history", "check_job", "judge_job", "judge_measurement", "read_polish_campaign",
     "run_finished", "run_line", "run_started", "surface_stats",
 ]

@@ -33,8 +33,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import fftconvolve
 
+from wavestack.pipeline import remove_physical_terms
 from wavestack.pipeline.polishing import ToolInfluence, removal_nm
-from wavestack.polish.measurement import remove_ptt, surface_stats
+from wavestack.polish.measurement import surface_stats
 
 __all__ = ["JobFloor", "job_floor"]
 
@@ -101,7 +102,7 @@ def job_floor(dwell_s: NDArray[np.float64], predicted_rms_nm: float, mask: NDArr
     for rate in (1.0 - rate_uncertainty, 1.0 + rate_uncertainty):
         for width in ((1.0 - width_uncertainty, 1.0 + width_uncertainty) if tif.kind == "gaussian" else (1.0,)):
             other = _scaled(tif, rate, width)
-            departure, _ = surface_stats(remove_ptt(removal_nm(dwell_s, other) - host, mask), mask)
+            departure, _ = surface_stats(remove_physical_terms(removal_nm(dwell_s, other) - host, mask, "ptt")[0], mask)
             model = max(model, departure)
     at = np.zeros(dwell_s.shape)
     rows = np.clip(np.rint(points_px[:, 0]).astype(np.intp), 0, dwell_s.shape[0] - 1)

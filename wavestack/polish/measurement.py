@@ -12,7 +12,7 @@ is cut to the aperture less ``edge_px`` pixels of its rim (the detected aperture
 the lowest fringe modulation and the station's worst phase: 0.3-4 waves of PV on a few rim pixels
 of the simulated stations, see docs/station.md; a solver would chase them), then has the
 configured target figure subtracted (if any) and piston, tip and tilt removed by a
-least-squares plane on the aperture, before the maps are averaged: tilt and piston change from
+least-squares plane on the aperture (:func:`~wavestack.pipeline.remove_physical_terms`), before the maps are averaged: tilt and piston change from
 result to result with alignment and vibration, and are not polished. The noise estimate is the
 standard error of the mean, ``sqrt(mean over the aperture of the per-pixel variance across the N
 maps / N)``, with the unbiased (N - 1) variance: the spread that is left after PTT removal is
@@ -30,9 +30,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from wavestack.pipeline import remove_physical_terms
 from wavestack.station.live_maps import MapSample, UntrustedMeasurement
 
-__all__ = ["ApertureKey", "MapSample", "Measurement", "UntrustedMeasurement", "average_surface", "remove_ptt",
+__all__ = ["ApertureKey", "MapSample", "Measurement", "UntrustedMeasurement", "average_surface",
            "surface_stats"]
 
 
@@ -106,32 +107,6 @@ class Measurement:
     def age_s(self, now_ns: int) -> float:
         """Seconds since the oldest map of the average was exposed."""
         return (now_ns - self.oldest_exposure_ns) * 1e-9
-
-
-def remove_ptt(surface: NDArray[np.floating], mask: NDArray[np.bool_]) -> NDArray[np.float64]:
-    """``surface`` less its least-squares plane (piston, tip, tilt) over ``mask``; NaN outside.
-
-    Parameters
-    ----------
-    surface : ndarray (H, W)
-    mask : ndarray (H, W) of bool
-        At least 3 pixels, not all on one line.
-
-    Example
-    -------
-    >>> rows, cols = np.mgrid[0:8, 0:8]
-    >>> bool(np.allclose(remove_ptt(3.0 + 0.5 * rows - cols, np.ones((8, 8), bool)), 0.0))
-    True
-    """
-    mask = np.asarray(mask, dtype=bool)
-    rows, cols = np.nonzero(mask)
-    values = np.asarray(surface, dtype=np.float64)[rows, cols]
-    centre_r, centre_c = rows.mean(), cols.mean()  # centred: a better-conditioned design
-    design = np.column_stack([np.ones(rows.size), rows - centre_r, cols - centre_c])
-    coefficients, *_ = np.linalg.lstsq(design, values, rcond=None)
-    out = np.full(mask.shape, np.nan)
-    out[rows, cols] = values - design @ coefficients
-    return out
 
 
 def surface_stats(surface_nm: NDArray[np.floating], mask: NDArray[np.bool_]) -> tuple[float, float]:
@@ -243,7 +218,7 @@ def average_surface(samples: Sequence[MapSample], *, wavelength_nm: float, refle
         surface = np.asarray(sample.waves, dtype=np.float64) * scale
         if target is not None:
             surface = surface - target
-        maps[index] = remove_ptt(surface, mask)[mask]
+        maps[index] = remove_physical_terms(surface, mask, "ptt")[0][mask]
     mean = maps.mean(axis=0)
     count = len(samples)
     noise = float(np.sqrt(maps.var(axis=0, ddof=1).mean() / count)) if count > 1 else float("nan")
