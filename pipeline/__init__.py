@@ -7,7 +7,7 @@ face, stacked so that a lower topic never imports a higher one:
 * bottom: :mod:`~wavestack.pipeline.zernike` (index conventions, circle and annular bases, conic
   null), :mod:`~wavestack.pipeline.aperture` (the aperture, detection, tracking, the per-frame
   watch), :mod:`~wavestack.pipeline.formats` (maps, images, MetroPro .dat and .datx);
-* then :mod:`~wavestack.pipeline.phase` (PSI, carrier, unwrapping, the measured wavefront, units);
+* then :mod:`~wavestack.pipeline.phase` (PSI, carrier, unwrapping, the measured wavefront);
 * then :mod:`~wavestack.pipeline.mapping` (meshes, Laplacians, CSF, QCM and conformal maps);
 * then :mod:`~wavestack.pipeline.fit` (methods, building, the fitter, its store) and
   :mod:`~wavestack.pipeline.shack_hartmann` (the lenslet lattice, centroids, slopes, reconstruction);
@@ -68,23 +68,14 @@ from .phase import (
     MeasuredWavefront,
     SpatialParams,
     TemporalUnwrapper,
-    WavefrontUnits,
     carrier_phase,
     four_step,
     hariharan_five_step,
     local_fringe_contrast,
-    nm_to_phase,
-    nm_to_waves,
     phase_from_frames,
-    phase_to_nm,
-    phase_to_waves,
-    surface_to_wavefront,
     unwrap_spatial,
     wavefront_from_carrier,
     wavefront_from_phase_shifts,
-    wavefront_to_surface,
-    waves_to_nm,
-    waves_to_phase,
 )
 from .polishing import (
     DwellSolution,
@@ -246,15 +237,6 @@ __all__ = [
     "zernike_basis",
     "zernike_gradient",
     "zernike_radial",
-    "phase_to_waves",
-    "waves_to_phase",
-    "waves_to_nm",
-    "nm_to_waves",
-    "phase_to_nm",
-    "nm_to_phase",
-    "wavefront_to_surface",
-    "surface_to_wavefront",
-    "WavefrontUnits",
     "unsupported_reason",
     "DwellSolution",
     "GridFrame",

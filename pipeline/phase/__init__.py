@@ -1,6 +1,4 @@
-"""Phase: PSI and carrier demodulation, spatial and temporal unwrapping, the measured wavefront, and
-units.
-"""
+"""Phase: PSI and carrier demodulation, spatial and temporal unwrapping, and the measured wavefront."""
 
 from __future__ import annotations
 
@@ -23,17 +21,6 @@ from .psi import (
 )
 from .spatial_unwrap import SpatialParams, count_residues, unwrap_spatial, wrap_phase
 from .temporal_unwrap import TemporalUnwrapper, UnwrapResult
-from .units import (
-    WavefrontUnits,
-    nm_to_phase,
-    nm_to_waves,
-    phase_to_nm,
-    phase_to_waves,
-    surface_to_wavefront,
-    wavefront_to_surface,
-    waves_to_nm,
-    waves_to_phase,
-)
 
 __all__ = [
     "CarrierResult",
@@ -42,7 +29,6 @@ __all__ = [
     "SpatialParams",
     "TemporalUnwrapper",
     "UnwrapResult",
-    "WavefrontUnits",
     "advanced_iterative_psi",
     "carrier_phase",
     "count_residues",
@@ -50,19 +36,11 @@ __all__ = [
     "hariharan_five_step",
     "least_squares_psi",
     "local_fringe_contrast",
-    "nm_to_phase",
-    "nm_to_waves",
     "pca_psi",
     "phase_from_frames",
-    "phase_to_nm",
-    "phase_to_waves",
-    "surface_to_wavefront",
     "unwrap_spatial",
     "wavefront_from_carrier",
     "wavefront_from_phase_shifts",
     "check_fringe_modulation",
-    "wavefront_to_surface",
-    "waves_to_nm",
-    "waves_to_phase",
     "wrap_phase",
 ]

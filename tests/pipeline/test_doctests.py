@@ -25,7 +25,6 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.fit.run_moments",  # RunPass
     "wavestack.pipeline.fit.run_refit",  # RunRefit
     "wavestack.pipeline.phase.psi.algorithms",  # phase_from_frames
-    "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
     "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice
     "wavestack.pipeline.shack_hartmann.lattice_detection",  # detect_lattice
     "wavestack.pipeline.shack_hartmann.lit",  # lit_lenslets

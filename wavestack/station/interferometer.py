@@ -275,7 +275,7 @@ class SetProcessor:
         step = self.settings.fit_decimation
         unwrapped = self._unwrapper.update(np.ascontiguousarray(wrapped[::step, ::step]),
                                            np.ascontiguousarray(aperture.mask[::step, ::step]))
-        waves = unwrapped.phase / (2.0 * np.pi)  # pipeline.phase_to_waves, kept float32 on the fit grid
+        waves = unwrapped.phase / (2.0 * np.pi)  # radians to waves, kept float32 on the fit grid
         timings["unwrap"] = time.perf_counter() - tick
 
         tick = time.perf_counter()

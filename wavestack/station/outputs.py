@@ -42,7 +42,6 @@ from wavestack.config import OutputSettings
 from wavestack.drivers.errors import DeviceError
 from wavestack.drivers.plc import CommandLimits, HeartbeatEchoStale, PlcRefused, PlcStatus, PolishingLink
 from wavestack.drivers.safety import SafeOutput, SafetyLimits, SafetyStage
-from wavestack.pipeline import wavefront_to_surface, waves_to_nm
 from wavestack.station.output_state import OutputAction, OutputMode, OutputState, PlcEvent, hold_reason, transition
 from wavestack.station.plc_status import Heartbeat
 from wavestack.station.results import OutputRecord, SentCommand, StationResult
@@ -122,8 +121,9 @@ class PlcOutput:
         self._link = link
         self._settings = settings
         self._n_terms = n_terms
-        # removal (surface nm) per wave of measured wavefront
-        self._scale_nm = wavefront_to_surface(waves_to_nm(1.0, wavelength_nm), settings.surface_factor) * settings.gain
+        # surface nm per wave of measured wavefront: waves x wavelength_nm is the wavefront in nm, x surface_factor
+        # the surface (docs/conventions.md, "Surface")
+        self._scale_nm = wavelength_nm * settings.surface_factor * settings.gain
         self._timeout_s = timeout_s
         self._max_age_s = max_age_s
         self._heartbeat_period_s = float(heartbeat_period_s)
