@@ -105,14 +105,13 @@ def _worker_pids(client: object) -> set[int]:
     return set(client.run(os.getpid).values())  # type: ignore[attr-defined]
 
 
-def batch_rate(paths: list[Path], workers: int, out: Path,
-               batched_fits: bool = False) -> tuple[float, int, list, CpuUse]:
+def batch_rate(paths: list[Path], workers: int, out: Path) -> tuple[float, int, list, CpuUse]:
     """(seconds, sets, summaries, CPU use) of one campaign on a fresh local cluster of ``workers``."""
     import threading
 
     shutil.rmtree(out, ignore_errors=True)
     store = ResultsStore(out)
-    campaign = prepare_campaign([str(p) for p in paths], store, batched_fits=batched_fits)
+    campaign = prepare_campaign([str(p) for p in paths], store)
     with campaign_client(None, workers) as client:
         client.run(__import__, "wavestack.batch.task")  # imports paid before the clock starts
         worker_pids = _worker_pids(client)
@@ -166,7 +165,6 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--recordings", type=int, default=20)
     parser.add_argument("--sets", type=int, default=12, help="sets per recording")
-    parser.add_argument("--batched-fits", action="store_true", help="fit the maps sharing a fitter in batches")
     parser.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "wavestack-bench-batch")
     args = parser.parse_args()
     logging.getLogger("distributed").setLevel(logging.ERROR)
@@ -175,17 +173,16 @@ def main() -> None:
     out = args.cache / "results"
     first_s, alone_sets = stages_alone(paths)  # before and after the campaigns: the load drifts
     # 1, 2, 1 workers: the 1-worker time is the mean of the runs before and after (order and drift)
-    one_a, sets, summaries, one_cpu = batch_rate(paths, 1, out, args.batched_fits)
-    two_s, _, _, two_cpu = batch_rate(paths, 2, out, args.batched_fits)
-    one_b, _, _, _ = batch_rate(paths, 1, out, args.batched_fits)
+    one_a, sets, summaries, one_cpu = batch_rate(paths, 1, out)
+    two_s, _, _, two_cpu = batch_rate(paths, 2, out)
+    one_b, _, _, _ = batch_rate(paths, 1, out)
     one_s = (one_a + one_b) / 2
     last_s, _ = stages_alone(paths)
     alone_s = (first_s + last_s) / 2
     load_after = os.getloadavg()
     stage = {k: sum(getattr(s, f"{k}_s") for s in summaries) for k in ("phase", "aperture", "unwrap", "fit")}
     total = sum(stage.values()) or 1.0
-    print(f"campaign: {len(paths)} recordings, {sets} sets (256 x 256, 5 frames each), cores: {os.cpu_count()}"
-          + (", batched fits" if args.batched_fits else ""))
+    print(f"campaign: {len(paths)} recordings, {sets} sets (256 x 256, 5 frames each), cores: {os.cpu_count()}")
     print(f"load average before {load_before[0]:.2f}, after {load_after[0]:.2f} (shared machine: ratios, not rates)")
     print(f"1 worker : {sets / one_s:7.2f} sets/s ({one_s:.2f} s: mean of {one_a:.2f} s before and {one_b:.2f} s "
           "after the 2-worker run)")

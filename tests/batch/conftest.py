@@ -131,10 +131,10 @@ COMPARED = ("index", "frame_ids", "valid", "reason", "coefficients", "fitter", "
             "residual_rms", "residual_pv", "difference_rms", "residual_pv_difference", "affected_by_damage")
 
 
-def _replayed_rows(path: Path, batched_fits: bool = False) -> list[dict[str, object]]:
+def _replayed_rows(path: Path) -> list[dict[str, object]]:
     """``wavestack replay``'s results of ``path`` (recorded settings) as comparable dicts."""
     with RecordingReader(path) as reader:
-        items = [r for r in replay(reader, recorded_config(reader, path), same_settings=True, batched_fits=batched_fits)
+        items = [r for r in replay(reader, recorded_config(reader, path), same_settings=True)
                  if isinstance(r, ReplayedResult)]
     return [_comparable(r.to_json() | {"aperture_id": -1 if r.processed.choice is None
                                       else r.processed.choice.aperture_id}) for r in items]

@@ -101,18 +101,6 @@ def test_an_interrupted_campaign_resumes_where_it_stopped(campaign, expected, ba
     assert again.status == 2 and "--resume" in again.stderr and _table(out, comparable) == {p: expected[p] for p in inputs}
 
 
-def test_batched_fits_on_the_command_line_give_replay_batched_fits_rows(campaign, batch, tmp_path: Path,
-                                                                       replay_by_cli, comparable) -> None:
-    out = tmp_path / "results"
-    done = batch.run(str(campaign.masked), "--workers", "1", "--out", str(out), "--json", "--batched-fits")
-    assert done.status == 0, done.stderr
-    table = _table(out, comparable)
-    batched = replay_by_cli([campaign.masked], "--batched-fits")
-    assert table == batched
-    # and the option changed the fits: not the rows of the one-by-one replay to the last bit
-    assert table != replay_by_cli([campaign.masked])
-
-
 def _free_port() -> int:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))

@@ -71,8 +71,7 @@ class CampaignPlan:
 
 
 def prepare_campaign(paths: Sequence[str], store: ResultsStore, *, config_text: str | None = None,
-                     resume: bool = False, min_block_sets: int = MIN_BLOCK_SETS,
-                     batched_fits: bool = False) -> CampaignPlan:
+                     resume: bool = False, min_block_sets: int = MIN_BLOCK_SETS) -> CampaignPlan:
     """Hash and plan every recording (in this process, before any cluster starts).
 
     Parameters
@@ -84,10 +83,6 @@ def prepare_campaign(paths: Sequence[str], store: ResultsStore, *, config_text: 
     resume : bool
         Skip recordings already in ``store`` with the same file hash and settings. Without it,
         ``store`` must hold no results yet.
-    batched_fits : bool
-        Fit each station block's maps that share a fitter in batches (``Fitter.fit_many``): the
-        rows of ``replay(..., batched_fits=True)``, within the float32 operator's rounding (~1e-6
-        waves) of the default one-by-one fits, which equal ``wavestack replay``'s exactly.
 
     Raises
     ------
@@ -100,7 +95,7 @@ def prepare_campaign(paths: Sequence[str], store: ResultsStore, *, config_text: 
     done = store.done_keys() if resume else set()
     plans, resumed, seen = [], [], set()
     for path in paths:
-        plan = plan_recording(str(path), config_text, min_block_sets=min_block_sets, batched_fits=batched_fits)
+        plan = plan_recording(str(path), config_text, min_block_sets=min_block_sets)
         key = (plan.file_sha256, plan.settings_hash)
         if key in done or key in seen:
             resumed.append(plan.path)

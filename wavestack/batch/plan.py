@@ -59,8 +59,6 @@ class Task:
         The station configuration to process with (TOML), None for the recorded one.
     message : str
         Why a recording is unsupported or unreadable (empty otherwise).
-    batched_fits : bool
-        Fit a station block's maps that share a fitter in batches (``replay(..., batched_fits=True)``).
     """
 
     path: str
@@ -71,7 +69,6 @@ class Task:
     check_next: bool = False
     config_text: str | None = None
     message: str = ""
-    batched_fits: bool = False
 
     @property
     def sets(self) -> int:
@@ -106,10 +103,9 @@ class RecordingPlan:
         return f"{self.file_sha256[:16]}-{self.settings_hash[:16]}"
 
 
-def settings_hash(config_text: str | None, *, batched_fits: bool = False) -> str:
+def settings_hash(config_text: str | None) -> str:
     """SHA-256 (hex) of the settings a campaign runs with: the configuration (None: each
-    recording's own), the software version, the result layout version and, when set, the batched
-    refit (its results differ from the one-by-one fits in the last float32 bits).
+    recording's own), the software version and the result layout version.
 
     Examples
     --------
@@ -117,8 +113,6 @@ def settings_hash(config_text: str | None, *, batched_fits: bool = False) -> str
     True
     """
     settings: dict[str, object] = {"config": config_text, "software": __version__, "results": RESULTS_VERSION}
-    if batched_fits:
-        settings["batched_fits"] = True
     text = json.dumps(settings, sort_keys=True)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -132,8 +126,7 @@ def file_sha256(path: str | Path) -> str:
         raise InputError(f"{path}: cannot read it ({error.strerror or error})") from error
 
 
-def plan_recording(path: str, config_text: str | None, *, min_block_sets: int = MIN_BLOCK_SETS,
-                   batched_fits: bool = False) -> RecordingPlan:
+def plan_recording(path: str, config_text: str | None, *, min_block_sets: int = MIN_BLOCK_SETS) -> RecordingPlan:
     """Identify one recording and divide it into tasks (see the module notes).
 
     A file that is not a recording wavestack can re-analyse is planned too, as one task of kind
@@ -145,14 +138,14 @@ def plan_recording(path: str, config_text: str | None, *, min_block_sets: int = 
         The file cannot be read at all (missing, a directory, no permission).
     """
     digest = file_sha256(path)
-    settings = settings_hash(config_text, batched_fits=batched_fits)
+    settings = settings_hash(config_text)
     key = f"{digest[:16]}-{settings[:16]}"
     kind, sets, starts, message = _inspect(path)
     if kind != "station" or sets < 2 * min_block_sets:
-        tasks = (Task(path, key, kind, 0, sets, False, config_text, message, batched_fits),)
+        tasks = (Task(path, key, kind, 0, sets, False, config_text, message),)
     else:
         bounds = _block_bounds(sets, starts, min_block_sets)
-        tasks = tuple(Task(path, key, kind, a, b, b < sets, config_text, "", batched_fits)
+        tasks = tuple(Task(path, key, kind, a, b, b < sets, config_text, "")
                       for a, b in zip(bounds, bounds[1:]))
     return RecordingPlan(path, digest, settings, kind, sets, tasks)
 

@@ -107,8 +107,7 @@ def _station(task: Task) -> TaskOutcome:
         skipped: list[SkippedItem] = []
         stage_s = dict.fromkeys(STAGES, 0.0)
         boundary_ok: bool | None = None
-        items = replay(view, config, same_settings=task.config_text is None,  # type: ignore[arg-type]
-                       batched_fits=task.batched_fits)
+        items = replay(view, config, same_settings=task.config_text is None)  # type: ignore[arg-type]
         for local, item in enumerate(items):
             position = task.start + local
             if task.check_next and position == task.stop:

@@ -37,10 +37,6 @@ def add_batch_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--resume", action="store_true",
                         help="skip recordings already in RESULTS with the same file and settings")
     parser.add_argument("--json", action="store_true", help="progress and summaries as JSON lines on stdout")
-    parser.add_argument("--batched-fits", action="store_true",
-                        help="fit the maps that share a fitter together (Fitter.fit_many): a little faster, but "
-                             "float32 fitters round otherwise than the live run (~1e-6 waves); replay "
-                             "--batched-fits gives the same rows")
 
 
 def run_batch(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -55,8 +51,7 @@ def run_batch(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         logging.getLogger("distributed").setLevel(logging.WARNING)
     config_text = load_station_config(args.config).text if args.config else None
     store = ResultsStore(args.out)
-    campaign = prepare_campaign(args.recordings, store, config_text=config_text, resume=args.resume,
-                                batched_fits=args.batched_fits)
+    campaign = prepare_campaign(args.recordings, store, config_text=config_text, resume=args.resume)
     view = _View(args.json)
     if campaign.plans:
         with campaign_client(args.scheduler, args.workers) as client:

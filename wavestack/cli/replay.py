@@ -21,9 +21,6 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path,
                         help="process with this station file's [processing] instead of the recorded one")
     parser.add_argument("--json", action="store_true", help="one JSON object per line, then a summary")
-    parser.add_argument("--batched-fits", action="store_true",
-                        help="fit the maps that share a fitter together (Fitter.fit_many): float32 fitters round "
-                             "otherwise than the live run (~1e-6 waves), so off by default")
     parser.add_argument("--plots", metavar="DIR",
                         help="draw the coefficients over time, the latency histogram and the last map into DIR")
 
@@ -40,8 +37,7 @@ def run_replay(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     collector = ReplayCollector()
     with RecordingReader(args.recording) as reader:
         config = load_station_config(args.config) if args.config else recorded_config(reader, args.recording)
-        for item in replay(reader, config, same_settings=args.config is None,
-                               batched_fits=args.batched_fits):
+        for item in replay(reader, config, same_settings=args.config is None):
             if args.json:
                 out.write(json_text(item.to_json()) + "\n")
             else:

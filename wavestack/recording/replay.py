@@ -21,7 +21,7 @@ from wavestack.config import StationConfig, parse_station_config
 from wavestack.pipeline import InputError
 from wavestack.recording.reader import RecordingDamaged, RecordingReader
 from wavestack.pipeline.instrument import SlopeOutcome
-from wavestack.station import InterferometerOutcome, SetBatch, build_processor, json_ready
+from wavestack.station import InterferometerOutcome, build_processor, json_ready
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,7 +99,7 @@ def recorded_config(reader: RecordingReader, path: str | Path) -> StationConfig:
 
 
 def replay(reader: RecordingReader, config: StationConfig, *,
-           same_settings: bool, batched_fits: bool = False) -> Iterator[ReplayedResult | SkippedSet]:
+           same_settings: bool) -> Iterator[ReplayedResult | SkippedSet]:
     """Recompute every intact recorded set; a damaged one is yielded as a :class:`SkippedSet`.
 
     Parameters
@@ -109,9 +109,6 @@ def replay(reader: RecordingReader, config: StationConfig, *,
         Settings to process with (the recorded ones, or others).
     same_settings : bool
         Reproduce each result's live fitter (the recorded settings).
-    batched_fits : bool
-        Fit the maps that share a fitter in batches (:class:`~wavestack.station.SetBatch`): the same
-        results to the float32 operator's rounding (~1e-6 waves), not bit for bit the live ones.
 
     Yields
     ------
@@ -125,7 +122,6 @@ def replay(reader: RecordingReader, config: StationConfig, *,
                          "(expected beside 'index')")
     rows = {int(i): k for k, i in enumerate(recorded.get("index", []))}
     processor = build_processor(config, background_builds=False)
-    batch: SetBatch[_Read] = SetBatch(processor, batched=batched_fits)
     gap = False
     rows_lost = any(d.part == "results" for d in reader.damage)
     try:
@@ -134,7 +130,6 @@ def replay(reader: RecordingReader, config: StationConfig, *,
             try:
                 frames = reader.read_set(position)
             except RecordingDamaged as error:
-                yield from (_compared(read, outcome, recorded) for read, outcome in batch.flush())
                 yield SkippedSet(position, set_index, str(error))
                 gap = True
                 continue
@@ -143,16 +138,14 @@ def replay(reader: RecordingReader, config: StationConfig, *,
             if same_settings and row is not None and recorded["fitter"][row]:
                 method = str(recorded["fitter"][row])
             read = _Read(set_index, tuple(f.frame_id for f in frames), row, gap or (rows_lost and row is None))
-            done = batch.add([f.pixels for f in frames], read, fitter_method=method)
-            yield from (_compared(r, outcome, recorded) for r, outcome in done)
-        yield from (_compared(read, outcome, recorded) for read, outcome in batch.flush())
+            yield _compared(read, processor.process([f.pixels for f in frames], fitter_method=method), recorded)
     finally:
         processor.close()
 
 
 @dataclass(frozen=True)
 class _Read:
-    """What replay keeps of a set while it waits for its fit."""
+    """What replay read of a set, besides its frames: its place in the recording and its recorded row."""
 
     index: int
     frame_ids: tuple[int, ...]

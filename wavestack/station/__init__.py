@@ -41,7 +41,6 @@ from wavestack.station.results import (
     TruthErrors,
     json_ready,
 )
-from wavestack.station.set_batch import GROUP_SETS, SetBatch
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 from wavestack.station.service import StationService
 from wavestack.station.station import Station, StationSummary, build_processor
@@ -50,9 +49,9 @@ from wavestack.station.truth import TruthCheck, coefficient_errors
 __all__ = [
     "ApertureAction", "ApertureEvent", "AperturePhase", "ApertureRecord", "ApertureState", "CARRIER_REFRESH_SETS",
     "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
-    "FitterChoice", "FitterDiagnostics", "FrameCounts", "GROUP_SETS", "Heartbeat", "InterferometerOutcome",
+    "FitterChoice", "FitterDiagnostics", "FrameCounts", "Heartbeat", "InterferometerOutcome",
     "LiveMaps", "LiveSnapshot", "LiveStats", "MapSample", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet",
-    "ProcessorOutcome", "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetBatch", "SetCounts",
+    "ProcessorOutcome", "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetCounts",
     "SetProcessor", "Station", "StationDevices", "StationResult", "StationService", "StationSummary", "TruthCheck",
     "TruthErrors", "UntrustedMeasurement", "build_processor", "coefficient_errors", "configure_camera", "confirm",
     "counter_lines", "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "render_live_view",
