@@ -15,13 +15,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-
-from remote_bench import trial  # noqa: E402
+from remote_bench import trial
 
 TARGET = 1 / 14
 

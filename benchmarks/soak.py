@@ -57,18 +57,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
-from soak_faults import (EXTRA_KINDS, FAULT_KINDS, Injection, ScheduledFault, Targets,  # noqa: E402
+from soak_faults import (EXTRA_KINDS, FAULT_KINDS, Injection, ScheduledFault, Targets,
                          make_schedule, select_kinds)
-from soak_observe import Observer, Window, device_snapshot  # noqa: E402
-from soak_monitor import Monitor  # noqa: E402
-from soak_operator import Operator  # noqa: E402
-from soak_trips import TripLimits  # noqa: E402
-from soak_report import growth_sites, render_text, rss_verdict, verdict_json  # noqa: E402
+from soak_observe import Observer, Window, device_snapshot
+from soak_monitor import Monitor
+from soak_operator import Operator
+from soak_trips import TripLimits
+from soak_report import growth_sites, render_text, rss_verdict, verdict_json
 
-from wavestack.config import StationConfig, load_station_config  # noqa: E402
-from wavestack.station import Station, StationSummary, counter_lines, open_station_devices  # noqa: E402
+from wavestack.config import StationConfig, load_station_config
+from wavestack.station import Station, StationSummary, counter_lines, open_station_devices
 
 FAILURE_KINDS = ("station_crashes", "thread_exceptions", "stuck", "trip_failures", "failsafe_trips",
                  "operator_rearms", "rearm_errors", "startup_watchdog_trips", "counters_backwards", "injection_errors")

@@ -10,19 +10,16 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
-from dataclasses import replace
-
 import pytest
+from soak_faults import FAULT_KINDS, make_schedule, select_kinds  # benchmarks/ is on pytest's pythonpath
+from soak_observe import Window
+from soak_report import Sample, fault_problems, rss_verdict
+from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from soak_faults import FAULT_KINDS, make_schedule, select_kinds  # noqa: E402
-from soak_observe import Window  # noqa: E402
-from soak_report import Sample, fault_problems, rss_verdict  # noqa: E402
-from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip  # noqa: E402
 
 SMALL = ROOT / "tests" / "configs" / "station-small.toml"
 
