@@ -18,7 +18,8 @@ cost. The residual map and its peak-to-valley take one more pass and are compute
 with them the RMS is taken from the map itself (the identity ``|w|^2 - c.b`` cancels: with a
 float32 operator it rounds by a few per cent of a residual much smaller than the map).
 Where the moments come from the run pass (small apertures, degree <= 7) and no physical terms
-are removed, steps 1-3 are one compiled call (:mod:`wavestack.pipeline.fit.run_refit`).
+are removed, steps 1-3 are one compiled call (:mod:`wavestack.pipeline.fit.run_refit`), with or
+without the residual map.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from .operator_projection import OperatorProjection
 from .physical_terms import terms_from_vector
 from .projection import Projected, check_frames
 from .results import FitBasis, FitResult, FitterDiagnostics, NanPolicy
-from .run_refit import RunRefit
+from .run_refit import RunFit, RunRefit
 
 if TYPE_CHECKING:  # only for annotations: the fitter does not need the map's modules
     from ..mapping import CanonicalMap
@@ -193,10 +194,10 @@ class Fitter:
         """
         if nan_policy not in ("raise", "omit"):
             raise ValueError(f"nan_policy: expected 'raise' or 'omit', got {nan_policy!r}")
-        if self._run_refit is not None and not residual:
+        if self._run_refit is not None:
             fitted = self._run_refit.fit(frame)
             if fitted is not None:  # else a sample is not finite: the general path applies the policy
-                return self._run_result(*fitted)
+                return self._run_result(frame, fitted, residual)
         projected = self._projection.project(frame, nan_policy)
         return self._finish(frame, projected, residual)
 
@@ -240,8 +241,9 @@ class Fitter:
         """
         if nan_policy not in ("raise", "omit"):
             raise ValueError(f"nan_policy: expected 'raise' or 'omit', got {nan_policy!r}")
-        if self._run_refit is not None and not residual:  # frame by frame, as fit() does
-            return [self.fit(frame, nan_policy=nan_policy) for frame in check_frames(frames, self._projection.shape)]
+        if self._run_refit is not None:  # frame by frame, as fit() does
+            return [self.fit(frame, nan_policy=nan_policy, residual=residual)
+                    for frame in check_frames(frames, self._projection.shape)]
         projected = self._projection.project_many(frames, keep_samples=residual)
         frames = np.asarray(frames)
         return [self.fit(frames[i], nan_policy=nan_policy, residual=residual) if p is None
@@ -349,12 +351,16 @@ class Fitter:
 
     # -- per-frame helpers ------------------------------------------------------------------
 
-    def _run_result(self, mapped: NDArray[np.float64], residual_sq: float) -> FitResult:
-        """The result of the one-call refit: ``mapped`` holds the coefficients (and circle ones)."""
+    def _run_result(self, frame: NDArray, fitted: RunFit, residual: bool) -> FitResult:
+        """The result of the one-call refit (the residual map, when asked for, by one evaluation)."""
         n_valid = self._equations.n_samples
-        return FitResult(coefficients=mapped[0], residual_rms=math.sqrt(residual_sq / n_valid), valid_count=n_valid,
-                         nan_count=0, basis=self.basis,
-                         circle_coefficients=mapped[1] if self._circle_transform is not None else None)
+        residual_sq, residual_pv, residual_map = fitted.residual_sq, None, None
+        if residual:  # the moment projection's residual needs the frame and the terms only
+            residual_map, residual_pv, residual_sq = self._projection.residual(frame, None, fitted.solved)
+        return FitResult(coefficients=fitted.mapped[0], residual_rms=math.sqrt(residual_sq / n_valid),
+                         valid_count=n_valid, nan_count=0, basis=self.basis, residual_pv=residual_pv,
+                         residual_map=residual_map,
+                         circle_coefficients=fitted.mapped[1] if self._circle_transform is not None else None)
 
     def _result(
         self,

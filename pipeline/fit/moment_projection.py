@@ -270,9 +270,13 @@ class MomentProjection:
             full[strip.row0:strip.row1, strip.col0:strip.col1][keep] = values[keep]
         return full
 
-    def residual(self, frame: NDArray, projected: Projected, terms: NDArray[np.float64]
+    def residual(self, frame: NDArray, projected: Projected | None, terms: NDArray[np.float64]
                  ) -> tuple[NDArray[np.float64], float, float]:
-        """The residual map ``w - A @ terms`` (NaN off the fitted or finite samples), its PV and its sum of squares."""
+        """The residual map ``w - A @ terms`` (NaN off the fitted or finite samples), its PV and its sum of squares.
+
+        ``projected`` is not read (the map needs only the frame and the terms); it is taken so that
+        both projections answer the same call, and the one-call refit passes None.
+        """
         residual = self.evaluate(terms)  # NaN off the fitted pixels, which the subtraction keeps
         np.subtract(frame, residual, out=residual)
         residual[~np.isfinite(residual)] = np.nan

@@ -23,8 +23,11 @@ calls and the Python between them were a third of the refit. The two paths agree
 (coefficients ~1e-14 relative; the residual sum of squares to ~1e-12 of ``|w - s|^2``, the
 identity's own cancellation), which the tests check on random apertures.
 
-Frames with a non-finite sample inside the aperture come back as None, and the fitter takes its
-general path, which applies the NaN policy.
+The solved (orthonormal) coefficients come back too, so a residual map asked for costs one
+evaluation of the basis on top (:meth:`MomentProjection.residual
+<wavestack.pipeline.fit.moment_projection.MomentProjection.residual>`). Frames with a non-finite
+sample inside the aperture come back as None, and the fitter takes its general path, which
+applies the NaN policy.
 """
 
 from __future__ import annotations
@@ -67,9 +70,9 @@ def _dot(a, b):  # pragma: no cover - compiled
 
 @numba.njit(nogil=True, cache=True, fastmath=FASTMATH)
 def _refit(frame, probe, origins, runs, rows_t, cols_t, size, moment_map, column_sums, inverse, constant,
-           transforms, n_samples, centred, out):  # pragma: no cover - compiled
-    """Fill ``out`` (T, M) with the mapped coefficients; return the residual sum of squares (NaN
-    when a fitted sample is not finite)."""
+           transforms, n_samples, centred, out, solved):  # pragma: no cover - compiled
+    """Fill ``solved`` (M,) with the orthonormal coefficients and ``out`` (T, M) with the mapped
+    ones; return the residual sum of squares (NaN when a fitted sample is not finite)."""
     shift = _shift(frame, probe)
     sums = np.zeros((cols_t.shape[0], cols_t.shape[1], rows_t.shape[2]))
     squares = accumulate_runs(frame, shift, origins, runs, cols_t, sums)
@@ -92,6 +95,7 @@ def _refit(frame, probe, origins, runs, rows_t, cols_t, size, moment_map, column
     fitted = _dot(basis, product)
     for i in range(m):
         basis[i] += centre * constant[i]
+        solved[i] = basis[i]
     for t in range(transforms.shape[0]):
         for i in range(m):
             out[t, i] = _dot(transforms[t, i], basis)
@@ -100,11 +104,30 @@ def _refit(frame, probe, origins, runs, rows_t, cols_t, size, moment_map, column
 
 
 @dataclass(frozen=True, eq=False)
+class RunFit:
+    """What the one-call refit gives for one frame.
+
+    Attributes
+    ----------
+    solved : ndarray, shape (M,)
+        The orthonormal coefficients (what the projection's ``evaluate`` takes, for a residual map).
+    mapped : ndarray, shape (T, M)
+        ``solved`` through each of the fitter's maps (the method's coefficients, then the circle ones).
+    residual_sq : float
+        The residual sum of squares from the normal-equation identity.
+    """
+
+    solved: NDArray[np.float64]
+    mapped: NDArray[np.float64]
+    residual_sq: float
+
+
+@dataclass(frozen=True, eq=False)
 class RunRefit:
     """A fitter's refit of one frame in one compiled call (see the module docstring).
 
-    Build it with :meth:`serving`; :meth:`fit` gives the mapped coefficients and the residual sum
-    of squares, as the fitter's general path would.
+    Build it with :meth:`serving`; :meth:`fit` gives the solved and mapped coefficients and the
+    residual sum of squares, as the fitter's general path would.
 
     Examples
     --------
@@ -114,8 +137,8 @@ class RunRefit:
     >>> fitter = build_fitter((rows - 31.5) ** 2 + (cols - 31.5) ** 2 < 30**2, modes=10, dtype=np.float64)
     >>> frame = np.nan_to_num(fitter.surface(np.eye(10)[4] * 0.1)) + 2.0
     >>> refit = RunRefit.serving(fitter._projection, fitter._equations, fitter._coefficient_transform[None])
-    >>> mapped, residual_sq = refit.fit(frame)
-    >>> round(float(mapped[0, 4]), 9), bool(np.allclose(mapped[0], fitter.fit(frame, residual=True).coefficients))
+    >>> mapped = refit.fit(frame).mapped
+    >>> round(float(mapped[0, 4]), 9), bool(np.allclose(mapped[0], fitter.fit(frame).coefficients))
     (0.1, True)
     """
 
@@ -158,8 +181,8 @@ class RunRefit:
                    inverse=np.ascontiguousarray(equations.basis_inverse),
                    constant=equations.constant_response.basis, transforms=np.ascontiguousarray(transforms))
 
-    def fit(self, frame: NDArray) -> tuple[NDArray[np.float64], float] | None:
-        """The mapped coefficients (T, M) and the residual sum of squares of one frame.
+    def fit(self, frame: NDArray) -> RunFit | None:
+        """One frame's coefficients (solved and mapped) and residual sum of squares.
 
         Returns None when a sample inside the aperture is not finite (the caller's NaN policy
         decides). Raises :class:`~wavestack.pipeline.fit.results.InvalidFrame` for a frame of another
@@ -167,7 +190,8 @@ class RunRefit:
         """
         frame = check_frame(frame, self.shape)
         out = np.empty(self.transforms.shape[:2])
+        solved = np.empty(self.transforms.shape[1])
         residual_sq = _refit(frame, self.probe, self.origins, self.runs, self.rows_t, self.cols_t, self.size,
                              self.moment_map, self.column_sums, self.inverse, self.constant, self.transforms,
-                             float(self.n_samples), self.centred, out)
-        return (out, residual_sq) if math.isfinite(residual_sq) else None
+                             float(self.n_samples), self.centred, out, solved)
+        return RunFit(solved, out, residual_sq) if math.isfinite(residual_sq) else None

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from fuzz import fuzz_settings
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 
 from wavestack.pipeline import InvalidFrame, build_fitter
@@ -33,6 +33,11 @@ def _aperture(kind: str, size: int, rng: np.random.Generator) -> tuple[np.ndarra
     return _mask(kind, size, rng), None
 
 
+def _general(fitter, frame):
+    """The fitter's general path (projection, then the normal equations), with the residual map."""
+    return fitter._finish(frame, fitter._projection.project(frame, "raise"), True)
+
+
 def _serves(fitter) -> bool:
     # The fitter's parts are private; the tests need to know which path a fit takes.
     return fitter._run_refit is not None
@@ -47,22 +52,30 @@ def test_the_one_call_refit_equals_the_general_path(kind, size, modes, ordering,
                                                     offset, seed) -> None:
     rng = np.random.default_rng(seed)
     mask, pupil = _aperture(kind, size, rng)
-    fitter = build_fitter(mask, method, modes, ordering, pupil, np.float64, normalisation=normalisation,
-                          refit="moments")
-    assert _serves(fitter)
+    try:
+        fitter = build_fitter(mask, method, modes, ordering, pupil, np.float64, normalisation=normalisation,
+                              refit="moments")
+    except ValueError:  # moments refused on this aperture (amplification): nothing to compare
+        assume(False)
+    assume(_serves(fitter))  # Fringe orderings reach degree 8 before 36 terms: beyond the run pass
     frame = _frame(fitter, mask, rng, offset).astype(np.float32 if single else np.float64)
-    fast = fitter.fit(frame)
-    general = fitter.fit(frame, residual=True)  # a residual map is asked for: the general path
+    fast = fitter.fit(frame, residual=True)
+    general = _general(fitter, frame)
     assert _relative(fast.coefficients, general.coefficients) <= 1e-12
     if method == "qr":
         assert _relative(fast.circle_coefficients, general.circle_coefficients) <= 1e-12
     else:
         assert fast.circle_coefficients is None
     assert (fast.valid_count, fast.nan_count, fast.removed) == (general.valid_count, 0, None)
-    # The residual identity |w - m|^2 - c.b cancels: both paths hold it to rounding of |w - m|^2.
+    # The residual identity |w - m|^2 - c.b cancels: it holds to rounding of |w - m|^2.
     samples = frame[np.isfinite(general.residual_map)].astype(np.float64)
     spread = float(np.sum((samples - samples.mean()) ** 2))
-    assert abs(fast.residual_rms**2 - general.residual_rms**2) * fast.valid_count <= 1e-11 * spread
+    identity = fitter.fit(frame)
+    assert abs(identity.residual_rms**2 - general.residual_rms**2) * fast.valid_count <= 1e-11 * spread
+    # With the map asked for, both paths take the RMS and PV from the same map of the same terms.
+    np.testing.assert_allclose(fast.residual_map, general.residual_map, rtol=0, atol=1e-12 * (1 + float(np.nanmax(np.abs(frame)))))
+    assert fast.residual_rms == pytest.approx(general.residual_rms, rel=1e-9, abs=1e-15)
+    assert fast.residual_pv == pytest.approx(general.residual_pv, rel=1e-9, abs=1e-12)
 
 
 def test_fit_takes_one_compiled_call_and_returns_what_it_computed(monkeypatch) -> None:
@@ -80,11 +93,13 @@ def test_fit_takes_one_compiled_call_and_returns_what_it_computed(monkeypatch) -
     monkeypatch.setattr(run_refit, "_refit", counted)
     result = fitter.fit(frame)
     assert calls == [mask.shape]
-    mapped, residual_sq = fitter._run_refit.fit(frame)
-    np.testing.assert_array_equal(result.coefficients, mapped[0])
-    assert result.residual_rms == pytest.approx(np.sqrt(residual_sq / result.valid_count), rel=1e-15)
-    fitter.fit(frame, residual=True)  # the residual map needs the general path
-    assert len(calls) == 2  # the explicit call above, not this one
+    fitted = fitter._run_refit.fit(frame)
+    np.testing.assert_array_equal(result.coefficients, fitted.mapped[0])
+    assert result.residual_rms == pytest.approx(np.sqrt(fitted.residual_sq / result.valid_count), rel=1e-15)
+    with_map = fitter.fit(frame, residual=True)  # the residual map: the same one call, then one evaluation
+    assert len(calls) == 3
+    np.testing.assert_array_equal(with_map.coefficients, result.coefficients)
+    np.testing.assert_allclose(with_map.residual_map, fitter._projection.residual(frame, None, fitted.solved)[0])
 
 
 def test_removal_wide_and_high_degree_fitters_keep_the_general_path() -> None:
