@@ -1,6 +1,9 @@
 """``build_fitter``: from an aperture to a ready :class:`~wavestack.pipeline.fit.fitter.Fitter`.
 
-The work done once per aperture, in order:
+The settings are checked once into a :class:`~wavestack.pipeline.fit.request.BuildRequest`; its
+``projection`` chooses the path: a polynomial method refits by separable moments
+(:mod:`wavestack.pipeline.fit.moment_build`, unless they would lose precision), every other by a
+stored operator. The operator path's work, in order:
 
 1. the aperture and its pupil circle (default: the minimum enclosing circle of the valid
    pixels), and the samples (valid pixels, in unit-disk coordinates of the pupil);
@@ -29,33 +32,29 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import DTypeLike, NDArray
 
-from .._checks import is_integer, one_of
 from ..aperture import Aperture, Topology, UnsupportedAperture
 from ..formats.limits import format_bytes, memory_budget_bytes
-from ..zernike import default_normalisation, mode_list
-from .annulus import annulus_obscuration, check_obscuration, with_obscuration_source
+from ..zernike import mode_list
+from .annulus import annulus_obscuration, with_obscuration_source
 from .basis_meaning import fit_basis
 from .auto import AUTO, BuildOne, advised_error, build_auto
 from .coefficient_maps import CoefficientMaps, coefficient_maps
 from .legendre_moments import MAX_AMPLIFICATION
-from .moment_build import MOMENT_METHODS, MomentRequest, build_moment_fitter
+from .moment_build import build_moment_fitter
 from .operator_projection import OperatorProjection
 from .fitter import Fitter
-from .methods import METHODS, MappingOptions, Samples, method_columns
+from .methods import METHODS, Samples, method_columns
 from .normal_equations import IllConditionedBasis, NormalEquations
 from .orthonormal import orthonormalise
-from .physical_terms import physical_term_basis, physical_term_names
+from .physical_terms import physical_term_basis
 from .results import FitterDiagnostics, Pupil
+from .request import BuildRequest, build_request
 from .sampling import aperture_of, fit_mask_of, pupil_of, samples_of
 
 if TYPE_CHECKING:
     from ..mapping import CanonicalMap
 
 logger = logging.getLogger(__name__)
-
-_ORDERINGS = ("noll", "ansi", "fringe")
-_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
-_FALLBACKS = (None, "qr")
 
 # Storage order of the operator, chosen for the one product a refit makes (``w @ A``), from
 # OpenBLAS gemv on this project's machine, N = 630,548 samples, one thread, median ms
@@ -115,23 +114,6 @@ def check_basis_size(valid_pixels: int, modes: int, max_bytes: int | None = None
     if needed > limit:
         raise ValueError(f"modes: {modes} modes on {valid_pixels} pixels need {format_bytes(needed)} to build, more "
                          f"than the memory budget of {format_bytes(limit)}; expected fewer modes or a smaller map")
-
-
-def _check_arguments(
-    method: str, modes: int, ordering: str, dtype: np.dtype, fallback: str | None, obscuration: float | None
-) -> None:
-    one_of(method, "method", (AUTO, *METHODS), voice="expected")
-    if obscuration is not None:
-        check_obscuration(obscuration)
-        if method != "annulus":
-            raise ValueError(f"obscuration: only the 'annulus' method takes an obscuration ratio, got method {method!r}")
-    if not is_integer(modes) or modes < 1:
-        raise ValueError(f"modes: expected a positive integer, got {modes!r}")
-    one_of(ordering, "ordering", _ORDERINGS, voice="expected")
-    if dtype not in _DTYPES:
-        raise ValueError(f"dtype: expected float32 or float64, got {dtype}")
-    if fallback not in _FALLBACKS:
-        raise ValueError(f"fallback: expected None or 'qr', got {fallback!r}")
 
 
 def _mapping_diagnostics(mapping: CanonicalMap | None) -> dict[str, object]:
@@ -273,27 +255,15 @@ def build_fitter(
     >>> np.round(result.coefficients[:6], 6) + 0.0
     array([0.  , 0.  , 0.  , 0.25, 0.  , 0.  ])
     """
-    dtype = np.dtype(dtype)
-    _check_arguments(method, modes, ordering, dtype, fallback, obscuration)
-    normalisation = normalisation or default_normalisation(ordering)
-    if normalisation not in ("rms", "edge"):
-        raise ValueError(f"normalisation: expected 'rms' or 'edge', got {normalisation!r}")
-    if remove is not None:
-        physical_term_names(remove)
-    one_of(refit, "refit", ("auto", "moments", "operator"), voice="expected")
-    options = MappingOptions(
-        laplacian=laplacian, mesh_vertices=mesh_vertices, angular_balance=bool(angular_balance)
-    )
-    settings = dict(
-        modes=int(modes), ordering=ordering, pupil=pupil, dtype=dtype,
-        normalisation=normalisation, remove=remove, options=options, refit=refit, obscuration=obscuration,
-    )
-    check_basis_size(0, int(modes))  # the mode bound; the operator's memory is checked where one is built
+    request = build_request(method, modes, ordering, pupil, dtype, normalisation=normalisation, remove=remove,
+                            laplacian=laplacian, mesh_vertices=mesh_vertices, angular_balance=angular_balance,
+                            fallback=fallback, refit=refit, obscuration=obscuration)
+    check_basis_size(0, request.modes)  # the mode bound; the operator's memory is checked where one is built
     aperture = aperture_of(aperture_or_mask)
-    settings["fit_mask"] = fit_mask_of(fit_mask, aperture)
+    request = dataclasses.replace(request, fit_mask=fit_mask_of(fit_mask, aperture))
 
-    def build(concrete: str, **overrides: object) -> Fitter:
-        return _build(aperture, concrete, **{**settings, **overrides})
+    def build(concrete: str, **changes: object) -> Fitter:
+        return _build(aperture, request.trying(concrete, **changes))
 
     try:
         if method == AUTO:
@@ -305,7 +275,7 @@ def build_fitter(
         failed = method
         if method == AUTO:  # what failed is the method auto chose
             failed = "qr" if aperture.topology is Topology.UNSUPPORTED else "csf-qcm"
-        raise advised_error(error, build, failed, aperture, int(modes)) from None
+        raise advised_error(error, build, failed, aperture, request.modes) from None
 
 
 def _with_fallback(build: BuildOne, aperture: Aperture, method: str, fallback: str | None) -> Fitter:
@@ -320,51 +290,39 @@ def _with_fallback(build: BuildOne, aperture: Aperture, method: str, fallback: s
         fitter.diagnostics = dataclasses.replace(fitter.diagnostics, fallback=f"{method}: {error}")
         return fitter
 
-def _build(
-    aperture: Aperture,
-    method: str,
-    *,
-    modes: int,
-    ordering: str,
-    pupil: Pupil | tuple[float, float, float] | None,
-    dtype: np.dtype,
-    normalisation: str,
-    remove: str | None,
-    options: MappingOptions,
-    fit_mask: NDArray[np.bool_] | None,
-    refit: str,
-    obscuration: float | None,
-) -> Fitter:
+def _build(aperture: Aperture, request: BuildRequest) -> Fitter:
+    """The fitter of one concrete method: by moments where the request's projection is moments
+    and they keep their precision, else by the stored operator."""
     started = time.perf_counter()
-    resolved_pupil = pupil_of(aperture, pupil)
-    mode_pairs = mode_list(ordering, modes)
-    annular = annulus_obscuration(aperture, resolved_pupil, obscuration, fit_mask) if method == "annulus" else None
+    method = request.method
+    resolved_pupil = pupil_of(aperture, request.pupil)
+    mode_pairs = mode_list(request.ordering, request.modes)
+    annular = (annulus_obscuration(aperture, resolved_pupil, request.obscuration, request.fit_mask)
+               if method == "annulus" else None)
     ratio = None if annular is None else annular.ratio
-    if method in MOMENT_METHODS and refit != "operator":
-        basis, scale = fit_basis(method, ordering, normalisation, mode_pairs, resolved_pupil, ratio)
-        fitter = build_moment_fitter(
-            aperture, MomentRequest(method, basis, scale, remove, dtype, pupil is not None, fit_mask), started
-        )
+    if request.projection == "moments":
+        basis, scale = fit_basis(method, request.ordering, request.normalisation, mode_pairs, resolved_pupil, ratio)
+        fitter = build_moment_fitter(aperture, request, basis, scale, started)
         if fitter is not None:
             return with_obscuration_source(fitter, annular)
-        if refit == "moments":
+        if request.refit == "moments":
             raise ValueError(f"refit: 'moments' would lose precision on this aperture (coefficient amplification "
                              f"above {MAX_AMPLIFICATION:g} even on the finest strips); expected refit='auto' or "
                              "'operator'")
-    check_basis_size(aperture.valid_count, int(modes))
-    samples = samples_of(aperture, resolved_pupil, pupil is not None, fit_mask)
+    check_basis_size(aperture.valid_count, request.modes)
+    samples = samples_of(aperture, resolved_pupil, request.user_pupil, request.fit_mask)
     timings = {"aperture": time.perf_counter() - started}
 
     tick = time.perf_counter()
-    columns = method_columns(method, aperture, samples, mode_pairs, options, ratio, fit_mask)
+    columns = method_columns(method, aperture, samples, mode_pairs, request.mapping, ratio, request.fit_mask)
     timings["basis"] = time.perf_counter() - tick
     if columns.mapping is not None:
         timings.update({f"map_{stage}": seconds for stage, seconds in columns.mapping.timings.items()})
     ratio = columns.mapping.r_in if columns.mapping is not None else ratio
-    basis, scale = fit_basis(method, ordering, normalisation, mode_pairs, resolved_pupil, ratio)
+    basis, scale = fit_basis(method, request.ordering, request.normalisation, mode_pairs, resolved_pupil, ratio)
 
     tick = time.perf_counter()
-    factors = _factorise(columns.values, method, scale, samples, remove, dtype)
+    factors = _factorise(columns.values, method, scale, samples, request.remove, request.dtype)
     timings["factorise"] = time.perf_counter() - tick
     timings["total"] = time.perf_counter() - started
 
@@ -389,9 +347,9 @@ def _build(
         from_coefficients=factors.maps.from_coefficients,
         basis=basis,
         diagnostics=diagnostics,
-        dtype=dtype,
+        dtype=request.dtype,
         circle_transform=factors.maps.circle_transform,
-        removal=remove,
+        removal=request.remove,
         removal_transform=factors.removal_transform,
         mapping=columns.mapping,
     ), annular)

@@ -21,6 +21,7 @@ import logging
 import time
 from dataclasses import dataclass
 from functools import partial
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg
@@ -47,7 +48,9 @@ from .orthonormal import check_condition, cholesky_factor, factor_quality
 from .physical_terms import physical_term_basis
 from .results import FitBasis, FitterDiagnostics, Pupil
 
-MOMENT_METHODS = ("circle", "qr", "annulus")  # the methods whose columns are polynomials in pixel coordinates
+if TYPE_CHECKING:  # only for annotations (the request module loads the mapped methods)
+    from .request import BuildRequest
+
 
 logger = logging.getLogger(__name__)
 
@@ -238,44 +241,20 @@ def _factors(mask: NDArray[np.bool_], strips: list, pupil: Pupil, coefficients: 
     return MomentFactors(state, triangular, removal_triangular, gram, sums, effective, len(strips))
 
 
-@dataclass(frozen=True)
-class MomentRequest:
-    """What :func:`build_moment_fitter` builds.
-
-    Attributes
-    ----------
-    method : {"circle", "qr", "annulus"}
-    basis : FitBasis
-        What the coefficients mean (modes, ordering, normalisation, pupil, and for ``annulus``
-        the obscuration ratio of its annular Zernike columns).
-    scale : ndarray, shape (M,)
-        Each mode's factor from unit RMS to the output normalisation.
-    remove : str or None
-        Physical terms removed before the fit.
-    dtype : numpy dtype
-        The fit dtype asked for (recorded; the moments always sum in float64).
-    user_pupil : bool
-        The pupil was given (pixels outside it are left out).
-    fit_mask : ndarray of bool or None
-        The pixels to fit when they are not the aperture's.
-    """
-
-    method: str
-    basis: FitBasis
-    scale: NDArray[np.float64]
-    remove: str | None
-    dtype: np.dtype
-    user_pupil: bool
-    fit_mask: NDArray[np.bool_] | None
-
-
-def build_moment_fitter(aperture: Aperture, request: MomentRequest, started: float) -> Fitter | None:
+def build_moment_fitter(aperture: Aperture, request: BuildRequest, basis: FitBasis, scale: NDArray[np.float64],
+                        started: float) -> Fitter | None:
     """A fitter that refits by separable moments, or None where they would lose precision.
 
     Parameters
     ----------
     aperture : Aperture
-    request : MomentRequest
+    request : BuildRequest
+        Of a polynomial method (``circle``, ``qr``, ``annulus``).
+    basis : FitBasis
+        What the coefficients mean (modes, ordering, normalisation, pupil, and for ``annulus``
+        the obscuration ratio of its annular Zernike columns).
+    scale : ndarray, shape (M,)
+        Each mode's factor from unit RMS to the output normalisation.
     started : float
         ``time.perf_counter()`` at the start of the build (for the timings).
 
@@ -286,15 +265,15 @@ def build_moment_fitter(aperture: Aperture, request: MomentRequest, started: flo
     IllConditionedBasis
         If the modes are linearly dependent on the fitted pixels, or kappa(G) exceeds 2**52.
     """
-    pupil, modes = request.basis.pupil, list(request.basis.modes)
+    pupil, modes = basis.pupil, list(basis.modes)
     mask, excluded = fitted_mask(aperture, pupil, request.user_pupil, request.fit_mask)
     timings = {"aperture": time.perf_counter() - started}
     tick = time.perf_counter()
     degree = max(max(n for n, _ in modes), 0 if request.remove is None else (1 if request.remove == "ptt" else 2))
     terms = None if request.remove is None else partial(_physical_terms, request.remove)
     columns = partial(_zernike_columns, modes)
-    if request.basis.annular_obscuration is not None:
-        columns = partial(annular_zernike_basis, modes, obscuration=request.basis.annular_obscuration)
+    if basis.annular_obscuration is not None:
+        columns = partial(annular_zernike_basis, modes, obscuration=basis.annular_obscuration)
     factors = build_moments(mask, pupil, columns, degree, request.method, terms)
     if factors is not None:
         timings["basis"] = factors.basis_seconds
@@ -305,7 +284,7 @@ def build_moment_fitter(aperture: Aperture, request: MomentRequest, started: flo
         return None
     n = factors.state.mask.sum()
     equations = NormalEquations(factors.gram, factors.column_sums, len(modes), int(n))
-    maps = coefficient_maps(request.method, request.scale, factors.triangular, factors.gram, int(n))
+    maps = coefficient_maps(request.method, scale, factors.triangular, factors.gram, int(n))
     removal_transform = None
     if factors.removal_triangular is not None:
         removal_transform = scipy.linalg.solve_triangular(
@@ -321,7 +300,7 @@ def build_moment_fitter(aperture: Aperture, request: MomentRequest, started: flo
     return Fitter(
         aperture=aperture, projection=MomentProjection(factors.state), equations=equations,
         coefficient_transform=maps.coefficient_transform, from_coefficients=maps.from_coefficients,
-        basis=request.basis, diagnostics=diagnostics, dtype=request.dtype,
+        basis=basis, diagnostics=diagnostics, dtype=request.dtype,
         circle_transform=maps.circle_transform, removal=request.remove, removal_transform=removal_transform,
     )
 
