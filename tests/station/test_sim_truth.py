@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from wavestack.config import load_station_config
-from wavestack.station import CycleRecord, InterferometerOutcome
+from wavestack.pipeline import InterferometerOutcome
+from wavestack.station import CycleRecord
 from wavestack.station.sim_truth import InterferometerTruthCheck
 
 SMALL = Path(__file__).resolve().parents[1] / "configs" / "station-small.toml"

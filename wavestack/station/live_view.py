@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wavestack.pipeline.instrument import PixelQuality
 from wavestack.station.counters import Counters
 from wavestack.station.results import StationResult
 
@@ -33,7 +34,9 @@ class LiveSnapshot:
     leading: tuple[tuple[int, float, float], ...]  # (index, value, change over the window), waves
     truth_error_rms: float | None
     last_reason: str | None
-    residual: tuple[float, float] | None = None  # (rms, pv) of the last valid result, waves
+    residual: tuple[float, float] | None = None  # (rms, pv) of the last valid result's fit residual, waves
+    figures: tuple[float, float] | None = None  # (pv, pvr) of the last valid result's wavefront, waves
+    quality: PixelQuality | None = None  # what the last valid result's data-quality mask left out
 
 
 class LiveStats:
@@ -57,6 +60,8 @@ class LiveStats:
         self._last: StationResult | None = None
         self._last_reason: str | None = None
         self._residual: tuple[float, float] | None = None
+        self._figures: tuple[float, float] | None = None
+        self._quality: PixelQuality | None = None
 
     def add(self, result: StationResult, now_ns: int) -> None:
         """Account for one result received at host time ``now_ns``."""
@@ -67,6 +72,8 @@ class LiveStats:
             self._valid += 1
             self._coefficients.append(result.coefficients)
             self._residual = (result.residual_rms, result.residual_pv)
+            self._figures = (result.pv, result.pvr)
+            self._quality = result.quality
         else:
             self._last_reason = result.reason
         self._last = result
@@ -96,7 +103,7 @@ class LiveStats:
             latency_p99_ms=float(np.nanpercentile(latencies, 99)) if np.isfinite(latencies).any() else math.nan,
             counters=last.counters if last else None, aperture=aperture, fitter=fitter, leading=leading,
             truth_error_rms=last.truth_error_rms if last else None, last_reason=self._last_reason,
-            residual=self._residual,
+            residual=self._residual, figures=self._figures, quality=self._quality,
         )
 
 
@@ -118,13 +125,24 @@ def render_live_view(snapshot: LiveSnapshot, ordering: str) -> list[str]:
     if s.leading:
         terms = "  ".join(f"Z{j}={value:+.4f}{_trend(change)}" for j, value, change in s.leading)
         lines.append(f"waves ({ordering}): {terms}")
+    if s.figures is not None and any(math.isfinite(v) for v in s.figures):
+        lines.append(f"wavefront: pv {s.figures[0]:.4f}  pvr {s.figures[1]:.4f} waves")
     if s.residual is not None:
         lines.append(f"fit residual: rms {s.residual[0]:.4f}  pv {s.residual[1]:.4f} waves")
+    if s.quality is not None:
+        lines.append(quality_line(s.quality))
     if s.truth_error_rms is not None:
         lines.append(f"error against the simulated truth: {s.truth_error_rms:.4f} waves rms")
     if s.last_reason:
         lines.append(f"last invalid: {s.last_reason}")
     return lines
+
+
+def quality_line(quality: PixelQuality) -> str:
+    """The pixels the last result used, and why the others inside the aperture were left out."""
+    q = quality
+    return (f"pixels used {q.used} of {q.inside}: left out {q.excluded} (low modulation {q.low_modulation}, "
+            f"saturated {q.saturated}, fringe order {q.untrusted_order}, clipped {q.clipped}, rim {q.rim})")
 
 
 def counter_lines(counters: Counters | None) -> list[str]:

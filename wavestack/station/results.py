@@ -1,8 +1,10 @@
 """The station's result record: everything one refit produced, as a plain value and as JSON.
 
-The small records on a result (:class:`ApertureRecord`, the fitter's diagnostics, the
-:class:`OutputRecord` of what went to the PLC) are frozen dataclasses; each has a ``to_json``
-that gives the keys the JSON lines and the recording have always carried.
+The small records on a result (:class:`ApertureRecord`, the fitter's diagnostics, the data
+quality's counts, the :class:`OutputRecord` of what went to the PLC) are frozen dataclasses; each
+has a ``to_json`` that gives the keys the JSON lines and the recording carry. The records every
+instrument's outcome fills (:class:`ApertureRecord`, :class:`FitDiagnostics`,
+:class:`~wavestack.pipeline.PixelQuality`) come from :mod:`wavestack.pipeline.instrument`.
 """
 
 from __future__ import annotations
@@ -11,56 +13,11 @@ import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Union
 
+from wavestack.pipeline.instrument import ApertureRecord, FitDiagnostics, PixelQuality
 from wavestack.station.counters import Counters
 
-
-@dataclass(frozen=True)
-class ApertureRecord:
-    """The aperture a result was measured on.
-
-    Attributes
-    ----------
-    id : int or None
-        Counted per run from 0 (interferometer: per aperture; Shack-Hartmann: per lit-lenslet set).
-    changed : bool
-        This set started it.
-    topology : str
-        A one-line description (interferometer: the aperture's topology and pixel count).
-    valid_pixels : int
-    components : int or None
-        Interferometer: connected components of the aperture.
-    valid_lenslets : int or None
-        Shack-Hartmann: lit lenslets used.
-    """
-
-    id: int | None
-    changed: bool
-    topology: str
-    valid_pixels: int
-    components: int | None = None
-    valid_lenslets: int | None = None
-
-    def to_json(self) -> dict[str, object]:
-        """The record's keys as the JSON lines carry them (absent optional figures left out)."""
-        record: dict[str, object] = {"id": self.id, "changed": self.changed, "topology": self.topology}
-        if self.components is not None:
-            record["components"] = self.components
-        if self.valid_lenslets is not None:
-            record["valid_lenslets"] = self.valid_lenslets
-        record["valid_pixels"] = self.valid_pixels
-        return record
-
-
-@dataclass(frozen=True)
-class FitDiagnostics:
-    """A mapped or QR fitter's figures: Gram condition number, map fold-overs, largest Beltrami coefficient."""
-
-    gram_condition: float | None
-    flips: int | None
-    max_beltrami: float | None
-
-    def to_json(self) -> dict[str, object]:
-        return asdict(self)
+__all__ = ["ApertureRecord", "FitDiagnostics", "FitterDiagnostics", "Heartbeat", "OutputRecord",
+           "ReconstructorDiagnostics", "SentCommand", "StationResult", "TruthErrors", "json_ready"]
 
 
 @dataclass(frozen=True)
@@ -195,8 +152,17 @@ class StationResult:
         RMS of the fit residual, waves (NaN when invalid).
     residual_pv : float
         Peak-to-valley of the fit residual, waves, over the same samples as ``residual_rms``
-        (the fit's grid; Shack-Hartmann: the slope misfit times the pitch, as for the RMS); NaN
-        when invalid.
+        (the fit grid's pixels used; Shack-Hartmann: the slope misfit times the pitch, as for the
+        RMS); NaN when invalid.
+    pv : float
+        Peak-to-valley of the measured wavefront less the removed physical terms (piston, tilt),
+        waves, over the pixels used; NaN when invalid or not computed.
+    pvr : float
+        Evans' robust PV: the PV of the 36-term Fringe Zernike fit of the same map plus three
+        times that fit's residual RMS, waves; NaN when invalid or not computed.
+    quality : PixelQuality or None
+        What the data-quality mask left out inside the aperture (``inside``, ``used``,
+        ``excluded``, ``low_modulation``, ``saturated``, ``untrusted_order``, ``clipped``).
     fitter : str
         Method of the fitter that ran (``csf-qcm``, ``qr``, ...).
     fitter_fallback : bool
@@ -243,6 +209,9 @@ class StationResult:
     truth_rms: float | None = None
     truth_error_rms: float | None = None
     output: OutputRecord | None = None
+    pv: float = float("nan")
+    pvr: float = float("nan")
+    quality: PixelQuality | None = None
 
     @classmethod
     def invalid(cls, index: int, reason: str, counters: Counters, *, ordering: str,
@@ -268,6 +237,7 @@ class StationResult:
         values["fitter_diagnostics"] = {} if self.fitter_diagnostics is None else self.fitter_diagnostics.to_json()
         values["aperture"] = {} if self.aperture is None else self.aperture.to_json()
         values["output"] = None if self.output is None else self.output.to_json()
+        values["quality"] = {} if self.quality is None else self.quality.to_json()
         return {"type": "result", **json_ready(values)}
 
 

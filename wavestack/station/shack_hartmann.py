@@ -1,7 +1,7 @@
 """One result from one Shack-Hartmann spot frame: centroids, lit lenslets, slopes, modal fit.
 
-The Shack-Hartmann station's hot path, the counterpart of
-:class:`~wavestack.station.interferometer.SetProcessor` for an interferometer:
+The Shack-Hartmann station's hot path, the counterpart of the interferometer processors
+(:mod:`wavestack.pipeline.instrument`):
 
 1. **centroid** — a thresholded centre of gravity of every subaperture of the configured
    lenslet grid (:class:`~wavestack.pipeline.Centroider`, built once per frame
@@ -49,6 +49,7 @@ from wavestack.config import ShackHartmannSettings
 from wavestack.pipeline import Centroider, LensletGrid, SpotMeasurement, convert_slopes, slopes
 from wavestack.pipeline import ModalReconstructor
 from wavestack.pipeline import mode_list
+from wavestack.pipeline.instrument import MapStatistics
 from wavestack.station.results import ApertureRecord, ReconstructorDiagnostics
 
 logger = logging.getLogger(__name__)
@@ -124,6 +125,12 @@ class SlopeOutcome:
     normalisation = "rms"
     unwrap_path = None
     new_aperture_mask = None  # the lit set is in the result's aperture record; no mask is recorded
+    quality = None  # no per-lenslet quality counts yet
+
+    @property
+    def statistics(self) -> MapStatistics:
+        """The residual's RMS and PV; the wavefront's PV and PVr are not computed from slopes yet (NaN)."""
+        return MapStatistics(self.residual_rms, self.residual_pv, math.nan, math.nan)
 
 
 def pupil_lenslets(grid: LensletGrid, centre_px: tuple[float, float], radius_px: float) -> NDArray[np.bool_]:
@@ -198,7 +205,7 @@ class _Geometry:
 class SlopeProcessor:
     """Turns Shack-Hartmann spot frames into Zernike coefficients (waves), keeping state between frames.
 
-    Same interface as :class:`~wavestack.station.interferometer.SetProcessor`: ``process`` takes a
+    Same interface as the interferometer processors: ``process`` takes a
     set of one frame and returns a :class:`SlopeOutcome`, invalid
     with a reason rather than raising for what a live stream can bring (no spots, too few lit
     lenslets, a reconstruction that cannot be done).
@@ -223,9 +230,6 @@ class SlopeProcessor:
         self._lit_key: bytes | None = None
         self._lit_sets = -1  # counts lit-lenslet sets as the aperture ids of an interferometer
         self.builds = 0  # reconstructors built so far (cache misses)
-
-    def close(self) -> None:
-        """Nothing runs in the background; for symmetry with SetProcessor."""
 
     def process(self, frames: Sequence[NDArray[np.generic]], *, fitter_method: str | None = None) -> SlopeOutcome:
         """Process one spot frame.

@@ -17,8 +17,7 @@ from wavestack.drivers.frames import Frame
 from wavestack.pipeline import InvalidFrame
 from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
 from wavestack.simulators.spots import SpotTruth
-from wavestack.station.fitter_cache import FitterChoice
-from wavestack.station.interferometer import InterferometerOutcome
+from wavestack.pipeline.instrument import FitterChoice, InterferometerOutcome
 from wavestack.station.results import TruthErrors
 from wavestack.station.shack_hartmann import SlopeOutcome, coefficient_errors
 

@@ -1,10 +1,11 @@
 """The station's result loop: newest set -> processing -> result -> PLC, recording, display.
 
 One pipeline thread (the caller's) takes the newest set from the source and runs one cycle, one
-way, one value per arrow: the processor (a
-:class:`~wavestack.station.interferometer.SetProcessor` for an interferometer, a
-:class:`~wavestack.station.shack_hartmann.SlopeProcessor` for a Shack-Hartmann sensor) returns a
-frozen outcome; :func:`~wavestack.station.cycle.make_result` makes the
+way, one value per arrow: the processor (the pipeline's
+:class:`~wavestack.pipeline.PhaseShiftingProcessor` or :class:`~wavestack.pipeline.CarrierProcessor`
+for an interferometer, given the station's :class:`~wavestack.station.fitter_cache.FitterCache` as
+its fitter source; a :class:`~wavestack.station.shack_hartmann.SlopeProcessor` for a Shack-Hartmann
+sensor) returns a frozen outcome; :func:`~wavestack.station.cycle.make_result` makes the
 :class:`~wavestack.station.results.StationResult`; the output stage sends it through the safety
 stage to the PLC (with a heartbeat each cycle, so a stalled pipeline is a dead host to the PLC's
 watchdog) and returns what it sent; every sink gets one
@@ -36,8 +37,9 @@ import logging
 import threading
 import time
 from dataclasses import asdict, dataclass, field, replace
+from typing import Union
 
-from wavestack.config import StationConfig
+from wavestack.config import BIT_DEPTH, StationConfig
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, renewed
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import WaitTimeout
@@ -45,7 +47,15 @@ from wavestack.drivers.role_thread import RoleThread
 from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
 from wavestack.station.devices import StationDevices, phase_steps_rad, reconnect_devices
-from wavestack.station.interferometer import SetProcessor
+from wavestack.pipeline.instrument import (
+    CarrierProcessor,
+    FitterSource,
+    InterferometerSettings,
+    PhaseShiftingProcessor,
+    SyncFitterSource,
+    processor_for,
+)
+from wavestack.station.fitter_cache import FitterCache
 from wavestack.station.heap import HeapRelease
 from wavestack.station.latency import LatencyHistogram
 from wavestack.station.outputs import PlcOutput
@@ -55,7 +65,9 @@ from wavestack.station.sources import CarrierSource, PhaseStepSource
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["ResultSink", "Station", "StationSummary", "build_processor"]
+__all__ = ["ResultSink", "Station", "StationSummary", "build_processor", "interferometer_settings"]
+
+Processor = Union[PhaseShiftingProcessor, CarrierProcessor, SlopeProcessor]
 
 _MAX_WAIT_SLICE_S = 0.25  # longest wait between looks at the stop event (and heartbeats, when shorter)
 _FIRST_BACKOFF_S = 0.05
@@ -123,7 +135,8 @@ class Station:
     def __init__(self, config: StationConfig, devices: StationDevices) -> None:
         self._config = config
         self._devices = devices
-        self.processor = build_processor(config)
+        self._fitters = FitterCache(config.processing.fit_settings()) if config.station.kind != "shack-hartmann" else None
+        self.processor = build_processor(config, self._fitters)
         # one stepping thread for every source: a new one per reconnect would get a new malloc arena
         self._stepping = RoleThread("phase-step-acquisition") if config.phase_stepping else None
         self._source: CarrierSource | PhaseStepSource | None = self._make_source()
@@ -159,7 +172,8 @@ class Station:
             self._source.stop()
         if self._stepping is not None:  # the source's stop waited for the stepping already
             self._stepping.close(timeout_s=self._config.camera.timeout_s * 2 + 5.0)
-        self.processor.close()
+        if self._fitters is not None:
+            self._fitters.close()
 
     # ------------------------------------------------------------------ the loop
 
@@ -257,9 +271,10 @@ class Station:
         if miscount is not None:  # never a wrong number, never a dead station: an invalid result
             result = replace(result, valid=False, reason=miscount)
         sent = self._output.send(result) if self._output is not None else None
+        slopes = isinstance(outcome, SlopeOutcome)
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
-                           outcome.lenslets if isinstance(outcome, SlopeOutcome) else None,
-                           None if isinstance(outcome, SlopeOutcome) else outcome.waves)
+                           outcome.lenslets if slopes else None, None if slopes else outcome.waves,
+                           None if slopes else outcome.flags)
 
     def _recover(self, stop: threading.Event, wait_s: float, *, force_camera: bool) -> None:
         """After a device fault: retire the source, back off, bring the devices back, start a new source.
@@ -328,12 +343,20 @@ class Station:
                            if self._output is not None else None)
 
 
-def build_processor(config: StationConfig, *, background_builds: bool = True) -> SetProcessor | SlopeProcessor:
+def interferometer_settings(config: StationConfig) -> InterferometerSettings:
+    """The interferometer processor's settings of a station: ``[processing]``, saturating at the camera's full scale."""
+    return config.processing.interferometer(saturation_counts=float(2 ** BIT_DEPTH[config.camera.pixel_format] - 1))
+
+
+def build_processor(config: StationConfig, fitters: FitterSource | None = None) -> Processor:
     """The processor of a station's kind: phase maps and fits, or Shack-Hartmann slopes.
 
-    ``background_builds=False`` builds fitters synchronously (replay, benchmarks of the stages).
+    ``fitters``: the interferometer's fitter source (the live station's :class:`FitterCache`);
+    None builds every fitter at once (:class:`~wavestack.pipeline.SyncFitterSource`: replay, batch,
+    the stage benchmarks), with the same numbers.
     """
     if config.station.kind == "shack-hartmann":
         assert config.shack_hartmann is not None  # parse_station_config requires [shack_hartmann]
         return SlopeProcessor(config.shack_hartmann, wavelength_nm=config.station.wavelength_nm)
-    return SetProcessor(config.processing, background_builds=background_builds)
+    settings = interferometer_settings(config)
+    return processor_for(settings, fitters if fitters is not None else SyncFitterSource(settings.fit))
