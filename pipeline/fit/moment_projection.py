@@ -10,14 +10,12 @@ degree 7 take the run pass (:mod:`~wavestack.pipeline.fit.run_moments`, float64 
 float32 frames are summed in float32 products up to degree 7 (the moment_chunks docstring gives
 the precision), everything else in float64. A frame whose sums come out non-finite (a NaN or
 infinity inside the aperture, or overflow) has its bad samples found here and the NaN policy
-applied; its bad samples, set to the shift, add nothing to the frame's own pass, and a downdate
-takes them out of the normal equations (an overflow of finite samples is summed again by the
-float64 chunked pass).
+applied; set to the shift, they add nothing to the float64 pass over the fitted samples, and a
+downdate takes them out of the normal equations.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -150,23 +148,16 @@ class MomentProjection:
         logger.debug("omitting %d non-finite samples by downdating the normal equations", count)
         downdate = self._downdate(bad, count)
         # The dropped samples set to the shift add nothing to the sums (their w - s is exactly 0), so
-        # the frame's own fast pass serves, and the downdate takes their rows out of the equations.
-        projected = self._first_pass(self._filled(frame, bad, shift), shift)
-        if projected is not None:
-            return dataclasses.replace(projected, downdate=downdate)
-        finite = ChunkedPass(self._strips, [~(o | b) for o, b in zip(self._outside, bad)], self._rows, self._cols,
-                             np.float64)
-        return self._summed(finite, frame, shift, downdate)
-
-    def _filled(self, frame: NDArray, bad: list[NDArray[np.bool_]], shift: float) -> NDArray:
-        """A copy of ``frame`` with its dropped samples set to the shift, in the dtype of the pass it takes."""
-        single = self._runs is None and self._single is not None and frame.dtype == np.float32
-        dtype = np.float32 if single else np.float64
-        value = float(np.float32(shift)) if single else shift  # the float32 pass rounds the shift so
-        filled = frame.astype(dtype, copy=True)
+        # the float64 pass serves the frame as it is, and the downdate takes their rows out of the
+        # equations: no pass of its own is made for the finite samples.
+        filled = frame.astype(np.float64, copy=True)
         for strip, dropped in zip(self._strips, bad):
-            filled[strip.row0:strip.row1, strip.col0:strip.col1][dropped] = value
-        return filled
+            filled[strip.row0:strip.row1, strip.col0:strip.col1][dropped] = shift
+        if self._runs is not None:
+            moments, squares = self._runs.moments(filled, shift)
+            if math.isfinite(squares):
+                return self._projected(moments, squares, shift, downdate)
+        return self._summed(self._double, filled, shift, downdate)
 
     def _first_pass(self, frame: NDArray, shift: float) -> Projected | None:
         """The fast pass for this frame, or None when its sums are not finite (:meth:`project` decides)."""
