@@ -11,10 +11,12 @@ Interferometer software does not fit what it cannot trust. Inside the aperture a
 * **untrusted fringe order**: after unwrapping, it differs from a good 4-neighbour by more than half
   a fringe (pi). A residue of the wrapped phase always leaves such a jump on one of its loop's
   edges (the unwrapped differences around a loop sum to zero, the wrapped ones to 2 pi), so this
-  catches residues too; both pixels of a jump are marked, since either may be the wrong one. And
-  where marked pixels cut part of the aperture off from its main body, the part's order relative
-  to the rest was carried through untrusted pixels: every good pixel outside the largest good
-  region of its aperture component is marked as well;
+  catches residues too; both pixels of a jump are marked, since either may be the wrong one (a
+  jump against a pixel of low modulation or saturated marks that one only). And where the jumps
+  cut part of the aperture off from its main body, the part's order relative to the rest is not
+  known: every pixel outside the largest region of its aperture component that no jump crosses is
+  marked as well (pixels marked for their signal alone still link the regions: a saturated fringe
+  or a dropout does not cut the order, a jump does);
 * **clipped** (by :mod:`~wavestack.pipeline.instrument.statistics`): its fit residual is a spike;
 * **rim**: it lies in the band along the aperture's edge that the phase method cannot measure
   (the carrier method: within one fringe period of the edge, where the sideband filter mixes the
@@ -28,8 +30,8 @@ never in a statistic. :class:`PixelQuality` counts them; the flags map says whic
 The counts are the instrument's, not the interferometer's: a Shack-Hartmann processor counts its
 lenslets (samples) the same way.
 
-Cost: two compiled walks over the fit grid (the signal, then the jumps) and, only when a fitted
-pixel was marked, one labelling of the good pixels (OpenCV). See ``benchmarks/bench_quality.py``.
+Cost: two compiled walks over the fit grid (the signal, then the jumps) and, only when a jump was
+found, one labelling of the regions between them (OpenCV). See ``benchmarks/bench_quality.py``.
 """
 
 from __future__ import annotations
@@ -165,14 +167,13 @@ def mark_quality(phase: NDArray[np.float64], modulation: NDArray[np.floating], f
     full_scale = full_scale_of(frames, settings.saturation_counts)
     flags = np.empty(adopted.shape, dtype=np.uint8)
     modulation = np.asarray(modulation)
-    marked = _mark_signal(modulation, frames, step, adopted, float(settings.min_modulation), full_scale,
-                          math.isfinite(full_scale), flags)
-    if settings.check_fringe_order:
-        marked += _mark_jumps(phase, flags)
-        if marked:
-            good = (flags == 0).view(np.uint8)
-            count, labels = cv2.connectedComponents(good, connectivity=4, ltype=cv2.CV_32S)
-            _keep_main_regions(labels, count, components[0], components[1], flags)
+    _mark_signal(modulation, frames, step, adopted, float(settings.min_modulation), full_scale,
+                 math.isfinite(full_scale), flags)
+    if settings.check_fringe_order and _mark_jumps(phase, adopted, flags):
+        # the regions the jumps cut off: their order against the main body is not known
+        linked = ((adopted == 0) & ((flags & UNTRUSTED_ORDER) == 0)).view(np.uint8)
+        count, labels = cv2.connectedComponents(linked, connectivity=4, ltype=cv2.CV_32S)
+        _keep_main_regions(labels, count, components[0], components[1], flags)
     waves = np.empty(adopted.shape, dtype=np.float64)
     _masked_waves(phase, flags, waves)
     return QualityMask(flags, waves)
@@ -209,23 +210,29 @@ def _mark_signal(modulation, frames, step, adopted, fraction, full_scale, check_
 
 
 @numba.njit(nogil=True, cache=True)
-def _mark_jumps(phase, flags):  # type: ignore[no-untyped-def]
-    """Mark both pixels of every jump of more than pi between good 4-neighbours; returns the pixels newly marked."""
+def _mark_jumps(phase, adopted, flags):  # type: ignore[no-untyped-def]
+    """Mark the ends of every jump of more than pi between fitted 4-neighbours; returns the pixels marked.
+
+    A jump between two pixels of good signal marks both (either may be wrong); a jump against a
+    pixel already marked for its signal marks that one only (its phase is the suspect).
+    """
     rows, cols = flags.shape
     marked = 0
     for r in range(rows):
         for c in range(cols):
-            if flags[r, c] & 251:  # marked for something other than its order, or outside
+            if adopted[r, c] != 0:
                 continue
             for dr, dc in ((0, 1), (1, 0)):
                 rr, cc = r + dr, c + dc
-                if rr >= rows or cc >= cols or flags[rr, cc] & 251:
+                if rr >= rows or cc >= cols or adopted[rr, cc] != 0:
                     continue
-                if abs(phase[r, c] - phase[rr, cc]) > math.pi:
-                    for pr, pc in ((r, c), (rr, cc)):
-                        if flags[pr, pc] == 0:
-                            flags[pr, pc] = 4
-                            marked += 1
+                if abs(phase[r, c] - phase[rr, cc]) <= math.pi:
+                    continue
+                weak_here, weak_there = flags[r, c] & 3, flags[rr, cc] & 3
+                for pr, pc, mark in ((r, c, weak_here or not weak_there), (rr, cc, weak_there or not weak_here)):
+                    if mark and not flags[pr, pc] & 4:
+                        flags[pr, pc] |= 4
+                        marked += 1
     return marked
 
 

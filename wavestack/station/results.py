@@ -182,7 +182,10 @@ class StationResult:
     truth_rms, truth_error_rms : float or None
         Simulated devices only: RMS of the simulator's true wavefront (piston, tilt removed as the
         fit removes them) and RMS of the measured minus the true wavefront, both over the fitted
-        aperture in the fitted subspace, waves.
+        aperture (the pixels the fitter was built on) in the fitted subspace, waves. The measured
+        coefficients come from the pixels the quality mask left in: where it leaves out many (a
+        saturated band), the physical tilt removal and a mapped basis see another pixel set, and
+        this figure grows with that, not with an error of the pixels used.
     output : OutputRecord or None
         What went to the PLC: ``sent`` (bool), ``status`` flags, ``command_id``.
     """
