@@ -38,13 +38,8 @@ RIM_PERIODS = 0.5
 class CarrierProcessor(InterferometerProcessor):
     """Single carrier frames to coefficients (see :class:`~.interferometer.InterferometerProcessor`).
 
-    Parameters
-    ----------
-    settings : InterferometerSettings
-        ``method = "carrier"``.
-    fitters : FitterSource
-    mask : ndarray of bool, optional
-        A user's aperture.
+    Takes the parameters of :class:`~.interferometer.InterferometerProcessor`, with
+    ``settings.method = "carrier"``.
 
     Example
     -------
@@ -58,10 +53,10 @@ class CarrierProcessor(InterferometerProcessor):
     (True, [0.125, 0.0], True)
     """
 
+    METHOD = "carrier"
+
     def __init__(self, settings: InterferometerSettings, fitters: FitterSource, *,
                  mask: NDArray[np.bool_] | None = None) -> None:
-        if settings.method != "carrier":
-            raise ValueError(f"method: a carrier processor takes method 'carrier', got {settings.method!r}")
         if settings.carrier_refresh_sets < 1:
             raise ValueError(f"carrier_refresh_sets: expected at least 1, got {settings.carrier_refresh_sets}")
         super().__init__(settings, fitters, mask=mask)

@@ -129,10 +129,20 @@ class InterferometerProcessor:
         Builds (or hands out) the fitter of each aperture.
     mask : ndarray of bool, optional
         A user's aperture, full resolution (``settings.aperture`` is then not used).
+
+    Raises
+    ------
+    ValueError
+        ``settings.method`` is not the one the subclass measures (:attr:`METHOD`).
     """
+
+    #: The ``settings.method`` this processor measures.
+    METHOD = ""
 
     def __init__(self, settings: InterferometerSettings, fitters: FitterSource, *,
                  mask: NDArray[np.bool_] | None = None) -> None:
+        if settings.method != self.METHOD:
+            raise ValueError(f"method: {type(self).__name__} measures method {self.METHOD!r}, got {settings.method!r}")
         self.settings = settings
         self.fitters = fitters
         self._keeper = ApertureKeeper(settings, fitters, mask)
@@ -279,6 +289,7 @@ class InterferometerProcessor:
         assert prepared.choice is not None and prepared.to_fit is not None and prepared.flags is not None
         timings = dict(prepared.timings_s)
         timings["fit"] = prepared.choose_s + fit_s
+        timings["clip"] = 0.0
         if not isinstance(fit, InvalidFrame) and self.settings.clip_sigma is not None:
             tick = time.perf_counter()
             try:

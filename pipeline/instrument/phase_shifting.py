@@ -14,7 +14,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..phase import check_fringe_modulation, phase_from_frames
-from .fitter_source import FitterSource
 from .interferometer import InterferometerProcessor, PhaseMaps
 from .settings import InterferometerSettings
 
@@ -26,13 +25,8 @@ _GIVEN_STEPS = ("lsq", "aia")  # the algorithms that take the steps (aia: as its
 class PhaseShiftingProcessor(InterferometerProcessor):
     """Sets of phase-shifted frames to coefficients (see :class:`~.interferometer.InterferometerProcessor`).
 
-    Parameters
-    ----------
-    settings : InterferometerSettings
-        ``method = "psi"``.
-    fitters : FitterSource
-    mask : ndarray of bool, optional
-        A user's aperture.
+    Takes the parameters of :class:`~.interferometer.InterferometerProcessor`, with
+    ``settings.method = "psi"``.
 
     Example
     -------
@@ -47,11 +41,7 @@ class PhaseShiftingProcessor(InterferometerProcessor):
     (True, 0.17)
     """
 
-    def __init__(self, settings: InterferometerSettings, fitters: FitterSource, *,
-                 mask: NDArray[np.bool_] | None = None) -> None:
-        if settings.method != "psi":
-            raise ValueError(f"method: a phase-shifting processor takes method 'psi', got {settings.method!r}")
-        super().__init__(settings, fitters, mask=mask)
+    METHOD = "psi"
 
     @property
     def frames_per_set(self) -> int | None:

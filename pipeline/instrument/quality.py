@@ -163,7 +163,7 @@ def mark_quality(phase: NDArray[np.float64], modulation: NDArray[np.floating], f
     >>> PixelQuality.of(mask.flags).untrusted_order, bool(np.isnan(mask.waves[2, 2]))  # it and its 4 neighbours
     (5, True)
     """
-    frames = tuple(np.asarray(f) for f in frames)
+    frames = tuple(np.ascontiguousarray(f) for f in frames)  # one array type for the compiled walk
     full_scale = full_scale_of(frames, settings.saturation_counts)
     flags = np.empty(adopted.shape, dtype=np.uint8)
     modulation = np.asarray(modulation)

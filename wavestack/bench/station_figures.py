@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-STAGES = ("phase", "aperture", "unwrap", "fit")
+STAGES = ("phase", "aperture", "unwrap", "quality", "fit", "clip", "statistics")
 TARGET_RESULTS_PER_S = 20.0  # carrier path
 TARGET_P99_MS = 150.0  # carrier path
 TARGET_NEW_MAP_S = 1.0
