@@ -31,7 +31,7 @@ The counts are the instrument's, not the interferometer's: a Shack-Hartmann proc
 lenslets (samples) the same way.
 
 Cost: two compiled walks over the fit grid (the signal, then the jumps) and, only when a jump was
-found, one labelling of the regions between them (OpenCV). See ``benchmarks/bench_quality.py``.
+found, one labelling of the regions between them (OpenCV). See ``benchmarks/bench_live_numbers.py``.
 """
 
 from __future__ import annotations
