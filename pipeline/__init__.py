@@ -10,12 +10,15 @@ face, stacked so that a lower topic never imports a higher one:
 * then :mod:`~wavestack.pipeline.phase` (PSI, carrier, the fringe signal, unwrapping, units);
 * then :mod:`~wavestack.pipeline.mapping` (meshes, Laplacians, CSF, QCM and conformal maps);
 * then :mod:`~wavestack.pipeline.fit` (methods, building, the fitter, its store) and
-  :mod:`~wavestack.pipeline.shack_hartmann` (grid, centroids, slopes, reconstruction);
-* on top, :mod:`~wavestack.pipeline.instrument`: one processor per instrument kind (frames to a
-  frozen outcome: phase, aperture, unwrap, data-quality mask, fit, spike clipping, PV and PVr),
-  the aperture confirmation table and the fitter-source protocol;
+  :mod:`~wavestack.pipeline.shack_hartmann` (the lenslet lattice, centroids, slopes, reconstruction);
+* on top, :mod:`~wavestack.pipeline.instrument`: one processor per instrument kind, the signal path
+  every command calls (``process(frames) -> outcome``: phase, aperture, unwrap, data-quality mask,
+  fit, spike clipping, PV and PVr; spots to slopes to terms), the aperture confirmation table and
+  the fitter-source protocol;
 * beside them, needing nothing but the root: :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
-  dwell grid and surface extension, dwell-time solvers).
+  dwell grid and surface extension, dwell-time solvers);
+* on top: :mod:`~wavestack.pipeline.surface` (ISO form figures and tolerances, PVr, PSD, slope,
+  areal filters: the figures a drawing tolerances).
 
 Private pieces shared across topics live at this root (``_angles``, ``_checks``).
 """
@@ -70,10 +73,14 @@ from .instrument import (
     FitterSource,
     InterferometerOutcome,
     InterferometerSettings,
+    LensletSlopes,
     MapStatistics,
     PhaseShiftingProcessor,
     PixelQuality,
     QualitySettings,
+    ShackHartmannProcessor,
+    ShackHartmannSetup,
+    SlopeOutcome,
     SyncFitterSource,
     measure_set,
     processor_for,
@@ -115,11 +122,30 @@ from .polishing import (
 )
 from .shack_hartmann import (
     Centroider,
-    LensletGrid,
+    LensletLattice,
     ModalReconstructor,
     SpotMeasurement,
     convert_slopes,
+    detect_lattice,
+    lit_lenslets,
     slopes,
+)
+from .surface import (
+    ArealFilter,
+    FormAnalyzer,
+    FormFigures,
+    FormTolerance,
+    RobustPVAnalyzer,
+    SurfaceAnalyzer,
+    SurfaceFigures,
+    SurfaceRequest,
+    ToleranceError,
+    filter_surface,
+    measured_area,
+    parse_areal_filter,
+    parse_form_tolerance,
+    slope_maps,
+    surface_psd,
 )
 from .zernike import (
     ConicTest,
@@ -167,7 +193,7 @@ __all__ = [
     "mapped_columns",
     "build_canonical_map",
     "Centroider",
-    "LensletGrid",
+    "LensletLattice",
     "SpotMeasurement",
     "convert_slopes",
     "slopes",
@@ -265,4 +291,25 @@ __all__ = [
     "residual_after",
     "solve_dwell_fft",
     "solve_dwell_lsq",
+    "detect_lattice",
+    "lit_lenslets",
+    "LensletSlopes",
+    "ShackHartmannProcessor",
+    "ShackHartmannSetup",
+    "SlopeOutcome",
+    "ArealFilter",
+    "FormAnalyzer",
+    "FormFigures",
+    "FormTolerance",
+    "RobustPVAnalyzer",
+    "SurfaceAnalyzer",
+    "SurfaceFigures",
+    "SurfaceRequest",
+    "ToleranceError",
+    "filter_surface",
+    "measured_area",
+    "parse_areal_filter",
+    "parse_form_tolerance",
+    "slope_maps",
+    "surface_psd",
 ]

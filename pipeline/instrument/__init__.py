@@ -1,17 +1,24 @@
 """Instruments: one processor per instrument kind, from frames to a frozen outcome.
 
-Above ``fit``: a processor strings phase, aperture, unwrapping, the data-quality mask, the fit,
-spike clipping and the map's figures (PV, PVr) together, with its state explicit, and knows nothing
-of devices, threads or the PLC. Every command calls it: the station (live), ``replay``, ``batch``,
-``polish``, ``align``, and ``analyze`` (a stream of one set, :func:`measure_set`).
+Above ``fit`` and ``shack_hartmann``: a processor turns one set of camera frames into one frozen
+outcome (``process(frames) -> outcome``), keeping its state explicit and knowing nothing of devices,
+threads or the PLC. Every command calls it: the station (live), ``replay``, ``batch``, ``polish``,
+``align``, and ``analyze`` (a stream of one set), so the same frames give the same numbers whichever
+command reads them.
 
-* processors: :class:`PhaseShiftingProcessor`, :class:`CarrierProcessor` (:func:`processor_for`);
-* what they are told: :class:`InterferometerSettings`, :class:`QualitySettings`, :class:`FitSettings`;
-* where their fitters come from: the :class:`FitterSource` protocol, :class:`SyncFitterSource`;
-* what they return: :class:`InterferometerOutcome` with :class:`PixelQuality` and :class:`MapStatistics`;
-* shared by every instrument (a Shack-Hartmann processor too): the aperture confirmation table
-  (:func:`confirm`), the fitter source, :class:`InstrumentOutcome`, :class:`ApertureRecord`,
-  :class:`FitDiagnostics`, :class:`PixelQuality`, :class:`MapStatistics`.
+* interferometers: :class:`PhaseShiftingProcessor`, :class:`CarrierProcessor` (:func:`processor_for`,
+  :func:`measure_set`): phase, aperture, unwrapping, the data-quality mask, the fit, spike clipping
+  and the map's figures (PV, PVr); told by :class:`InterferometerSettings`, :class:`QualitySettings`,
+  :class:`FitSettings`; their fitters from the :class:`FitterSource` protocol
+  (:class:`SyncFitterSource`); returning :class:`InterferometerOutcome`;
+* Shack-Hartmann: :class:`ShackHartmannProcessor` (:mod:`.shack_hartmann`): spot frames to Zernike
+  terms, on a square or hexagonal lenslet lattice (configured, or found in a reference frame),
+  described by a :class:`ShackHartmannSetup` (:mod:`.sensor_setup`), its geometry built once per
+  reference (:mod:`.lenslet_geometry`); returning :class:`SlopeOutcome`;
+* shared by every instrument: the aperture confirmation table (:func:`confirm`),
+  :class:`InstrumentOutcome`, the records an outcome carries (:mod:`.records`:
+  :class:`ApertureRecord`, :class:`FitDiagnostics`, :class:`ReconstructorDiagnostics`),
+  :class:`PixelQuality`, :class:`MapStatistics`.
 """
 
 from __future__ import annotations
@@ -37,7 +44,8 @@ from .fitter_source import (
     choice_of,
 )
 from .interferometer import InterferometerProcessor, PhaseMaps, PreparedSet
-from .outcome import ApertureRecord, FitDiagnostics, InstrumentOutcome, InterferometerOutcome
+from .lenslet_geometry import LensletGeometry, cells_inside, configured_lattice, lenslet_geometry
+from .outcome import InstrumentOutcome, InterferometerOutcome
 from .phase_shifting import PhaseShiftingProcessor
 from .quality import (
     CLIPPED,
@@ -51,10 +59,20 @@ from .quality import (
     full_scale_of,
     mark_quality,
 )
+from .records import ApertureRecord, FitDiagnostics, ReconstructorDiagnostics
+from .sensor_setup import ShackHartmannSetup
 from .settings import ConicNull, InterferometerSettings, QualitySettings
-from .statistics import MAX_CLIP_PASSES, PVR_MODES, MapStatistics, clip_spikes, map_pv, pvr_fitter, robust_pv
+from .shack_hartmann import (
+    MODAL,
+    LensletSlopes,
+    ReconstructorCache,
+    ShackHartmannProcessor,
+    ShackHartmannState,
+    SlopeOutcome,
+)
+from .statistics import MAX_CLIP_PASSES, MapStatistics, clip_spikes, map_pv, pvr_analyzer, robust_pv
 from .streams import measure_map, measure_set, processor_for
-from .tracking import AdoptedAperture, ApertureConfirming, ApertureKeeper
+from .tracking import AdoptedAperture, ApertureConfirming, ApertureKeeper, null_waves
 
 __all__ = [
     "CLIPPED",
@@ -62,8 +80,8 @@ __all__ = [
     "IMPOSSIBLE",
     "LOW_MODULATION",
     "MAX_CLIP_PASSES",
+    "MODAL",
     "OUTSIDE",
-    "PVR_MODES",
     "RIM",
     "SATURATED",
     "TRANSITIONS",
@@ -87,6 +105,8 @@ __all__ = [
     "InterferometerOutcome",
     "InterferometerProcessor",
     "InterferometerSettings",
+    "LensletGeometry",
+    "LensletSlopes",
     "MapStatistics",
     "PhaseMaps",
     "PhaseShiftingProcessor",
@@ -94,17 +114,27 @@ __all__ = [
     "PreparedSet",
     "QualityMask",
     "QualitySettings",
+    "ReconstructorCache",
+    "ReconstructorDiagnostics",
+    "ShackHartmannProcessor",
+    "ShackHartmannSetup",
+    "ShackHartmannState",
+    "SlopeOutcome",
     "SyncFitterSource",
     "build_configured",
+    "cells_inside",
     "choice_of",
     "clip_spikes",
+    "configured_lattice",
     "confirm",
     "full_scale_of",
+    "lenslet_geometry",
     "map_pv",
     "mark_quality",
     "measure_map",
     "measure_set",
+    "null_waves",
     "processor_for",
-    "pvr_fitter",
+    "pvr_analyzer",
     "robust_pv",
 ]

@@ -311,7 +311,7 @@ class InterferometerProcessor:
         tick = time.perf_counter()
         assert fit.residual_pv is not None and prepared.adopted is not None  # asked for
         statistics = MapStatistics(fit.residual_rms, fit.residual_pv, map_pv(prepared.to_fit, fit.removed),
-                                   robust_pv(prepared.adopted.pvr_fitter, prepared.to_fit))
+                                   robust_pv(prepared.adopted.pvr, prepared.to_fit))
         timings["statistics"] = time.perf_counter() - tick
         return InterferometerOutcome(True, None, fit.coefficients, fit, statistics=statistics, **context)
 

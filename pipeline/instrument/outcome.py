@@ -2,14 +2,13 @@
 
 :class:`InstrumentOutcome` is what the station's result is made of, whichever the instrument
 (an interferometer's :class:`InterferometerOutcome` here, a Shack-Hartmann processor's slope
-outcome beside it); :class:`ApertureRecord`, :class:`FitDiagnostics`,
-:class:`~.statistics.MapStatistics` and :class:`~.quality.PixelQuality` are the records both
-kinds fill. Nothing here does I/O or knows a device.
+outcome beside it); :class:`~.records.ApertureRecord`, :class:`~.statistics.MapStatistics` and
+:class:`~.quality.PixelQuality` are the records both kinds fill. Nothing here does I/O or knows a device.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -19,58 +18,10 @@ from ..aperture import Aperture, EdgeCircle
 from ..fit import FitResult
 from .fitter_source import FitterChoice
 from .quality import PixelQuality
+from .records import ApertureRecord, FitDiagnostics
 from .statistics import MapStatistics
 
-__all__ = ["ApertureRecord", "FitDiagnostics", "InstrumentOutcome", "InterferometerOutcome"]
-
-
-@dataclass(frozen=True)
-class ApertureRecord:
-    """The aperture a result was measured on.
-
-    Attributes
-    ----------
-    id : int or None
-        Counted per run from 0 (interferometer: per aperture; Shack-Hartmann: per lit-lenslet set).
-    changed : bool
-        This set started it.
-    topology : str
-        A one-line description (interferometer: the aperture's topology and pixel count).
-    valid_pixels : int
-    components : int or None
-        Interferometer: connected components of the aperture.
-    valid_lenslets : int or None
-        Shack-Hartmann: lit lenslets used.
-    """
-
-    id: int | None
-    changed: bool
-    topology: str
-    valid_pixels: int
-    components: int | None = None
-    valid_lenslets: int | None = None
-
-    def to_json(self) -> dict[str, object]:
-        """The record's keys as the JSON lines carry them (absent optional figures left out)."""
-        record: dict[str, object] = {"id": self.id, "changed": self.changed, "topology": self.topology}
-        if self.components is not None:
-            record["components"] = self.components
-        if self.valid_lenslets is not None:
-            record["valid_lenslets"] = self.valid_lenslets
-        record["valid_pixels"] = self.valid_pixels
-        return record
-
-
-@dataclass(frozen=True)
-class FitDiagnostics:
-    """A mapped or QR fitter's figures: Gram condition number, map fold-overs, largest Beltrami coefficient."""
-
-    gram_condition: float | None
-    flips: int | None
-    max_beltrami: float | None
-
-    def to_json(self) -> dict[str, object]:
-        return asdict(self)
+__all__ = ["InstrumentOutcome", "InterferometerOutcome"]
 
 
 class InstrumentOutcome(Protocol):

@@ -1,4 +1,4 @@
-"""The figures of a fitted map: spike clipping, PV, and Evans' robust PV (PVr).
+"""The figures of a fitted map: spike clipping and PV (PVr: :class:`~wavestack.pipeline.surface.RobustPVAnalyzer`).
 
 * **Spike clipping**, as interferometer software offers it: pixels whose fit residual exceeds
   ``clip_sigma`` times the residual RMS are left out (marked :data:`~.quality.CLIPPED`) and the fit
@@ -7,13 +7,9 @@
   refit's RMS is smaller. With no spike the check is one compiled pass over the residual.
 * **PV** of the map less the physical terms the fit removed (piston and tilt, or power too), over
   the pixels used: what an optician reads as the map's peak to valley.
-* **PVr** (C. Evans, "PVr - a robust amplitude parameter for optical surface specification", Opt.
-  Eng. 48(4) 043605, 2009): the PV of the 36-term Fringe Zernike fit of the map plus three times
-  the RMS of that fit's residual. The fit is on the pixels used, with the same physical terms
-  removed, by the ``qr`` method (the Fringe terms orthonormalised on the pixels: the same fitted
-  surface as the plain circle polynomials, and stable on any aperture); its PV is taken over the
-  pixels used. The fitted surface is smooth, so a spike or a wrong fringe order moves PVr by its
-  share of the RMS only, where it moves PV by its full height.
+* **PVr** (Evans' robust PV) is the surface topic's :class:`~wavestack.pipeline.surface.RobustPVAnalyzer`,
+  built once per adopted aperture on the pixels its fitter was built on, with the same physical
+  terms removed, and measured on the pixels each set used (:func:`robust_pv`).
 
 The figures are shared with a Shack-Hartmann processor (:class:`MapStatistics`), which gives its
 own reconstruction's values.
@@ -29,18 +25,16 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from ..aperture import Aperture
-from ..fit import FitResult, Fitter, IllConditionedBasis, InvalidFrame, build_fitter
+from ..fit import FitResult, Fitter, IllConditionedBasis, InvalidFrame
 from ..fit import PhysicalTerms
+from ..surface import RobustPVAnalyzer, measured_area
 
-__all__ = ["MAX_CLIP_PASSES", "PVR_MODES", "MapStatistics", "clip_spikes", "map_pv", "pvr_fitter", "robust_pv"]
+__all__ = ["MAX_CLIP_PASSES", "MapStatistics", "clip_spikes", "map_pv", "pvr_analyzer", "robust_pv"]
 
 #: Most fits spike clipping runs after the first (module notes).
 MAX_CLIP_PASSES: Final = 3
 #: Residuals below this are rounding, never a spike (map units: waves here, 0.6 pm at 633 nm).
 SPIKE_FLOOR: Final = 1e-6
-#: Evans' PVr fits the first 36 Fringe Zernike terms.
-PVR_MODES: Final = 36
 
 
 @dataclass(frozen=True)
@@ -105,35 +99,31 @@ def clip_spikes(fitter: Fitter, waves: NDArray[np.float64], flags: NDArray[np.ui
     return fit, clipped
 
 
-def pvr_fitter(aperture: Aperture, fit_mask: NDArray[np.bool_], remove: str | None, dtype: str) -> Fitter | None:
-    """The 36-term Fringe fitter of PVr on the pixels a fit uses (None where the terms cannot be fitted)."""
+def pvr_analyzer(fitted: NDArray[np.bool_], remove: str | None, dtype: str) -> RobustPVAnalyzer | None:
+    """Evans' PVr on the pixels a fitter was built on (None where the 36 terms cannot be fitted there)."""
     try:
-        return build_fitter(aperture, method="qr", modes=PVR_MODES, ordering="fringe", remove=remove,
-                            fit_mask=fit_mask, dtype=np.dtype(dtype))
+        return RobustPVAnalyzer(measured_area(fitted), remove=remove, dtype=np.dtype(dtype))
     except (IllConditionedBasis, ValueError):
         return None
 
 
-def robust_pv(fitter: Fitter | None, waves: NDArray[np.float64]) -> float:
-    """Evans' PVr of a map over its finite pixels (module notes); NaN without a fitter or samples.
+def robust_pv(analyzer: RobustPVAnalyzer | None, waves: NDArray[np.float64]) -> float:
+    """Evans' PVr of a map over its finite pixels; NaN without an analyzer or enough samples.
 
     Example
     -------
     >>> rows, cols = np.mgrid[:64, :64]
     >>> rho2 = ((rows - 31.5) ** 2 + (cols - 31.5) ** 2) / 30.0**2
-    >>> disk = Aperture.from_mask(rho2 < 1)
     >>> waves = np.where(rho2 < 1, 0.1 * rho2, np.nan)  # a paraboloid: 0.1 waves PV, no residual
-    >>> round(robust_pv(pvr_fitter(disk, disk.mask, "ptt", "float64"), waves), 3)
+    >>> round(robust_pv(pvr_analyzer(rho2 < 1, "ptt", "float64"), waves), 3)
     0.099
     """
-    if fitter is None:
+    if analyzer is None:
         return math.nan
     try:
-        fit = fitter.fit(waves, nan_policy="omit")
+        return analyzer.measure(waves, nan_policy="omit").pvr
     except InvalidFrame:
         return math.nan
-    low, high = _extremes_where_finite(fitter.surface(fit.coefficients), waves)
-    return high - low + 3.0 * fit.residual_rms
 
 
 def map_pv(waves: NDArray[np.float64], removed: PhysicalTerms | None) -> float:

@@ -23,7 +23,7 @@ from .phase_shifting import PhaseShiftingProcessor
 from .quality import LOW_MODULATION, OUTSIDE, PixelQuality
 from .settings import InterferometerSettings
 from .tracking import null_waves
-from .statistics import MapStatistics, clip_spikes, map_pv, pvr_fitter, robust_pv
+from .statistics import MapStatistics, clip_spikes, map_pv, pvr_analyzer, robust_pv
 
 __all__ = ["measure_map", "measure_set", "processor_for"]
 
@@ -112,7 +112,7 @@ def measure_map(waves: NDArray[np.floating], aperture: Aperture, measured: NDArr
     if settings.clip_sigma is not None:
         fit, _ = clip_spikes(choice.fitter, to_fit, flags, fit, settings.clip_sigma)
     assert fit.residual_pv is not None
-    pvr = robust_pv(pvr_fitter(aperture, measured, settings.fit.remove, settings.fit.dtype), to_fit)
+    pvr = robust_pv(pvr_analyzer(measured, settings.fit.remove, settings.fit.dtype), to_fit)
     statistics = MapStatistics(fit.residual_rms, fit.residual_pv, map_pv(to_fit, fit.removed), pvr)
     if not np.array_equal(np.isnan(raw), np.isnan(to_fit)):  # clipped pixels leave the measured map too
         raw[np.isnan(to_fit)] = np.nan

@@ -10,7 +10,7 @@ Adopting an aperture fixes what the fit grid (every ``fit_decimation``-th pixel)
 pixels, those the fitter is built on (the aperture less its pixels of low modulation in the
 adopting set: a dust dropout the detection filled, a speck the closing took in; and less the rim
 band the phase method cannot measure, ``rim_px`` wide; both counted in every result), their
-connected components (for the quality mask), the PVr fitter and, for a null test, the null
+connected components (for the quality mask), the PVr analyzer and, for a null test, the null
 wavefront on the pupil. The fit's pupil is still the whole aperture's (its edge).
 """
 
@@ -32,13 +32,13 @@ from ..aperture import (
     choose_aperture,
     compare_apertures,
 )
-from ..fit import Fitter
+from ..surface import RobustPVAnalyzer
 from ..zernike import null_wavefront_waves
 from .confirmation import ApertureAction, ApertureEvent, AperturePhase, ApertureState, Detection, confirm
 from .fitter_source import FitterSource
 from .quality import LOW_MODULATION, OUTSIDE, RIM
 from .settings import ConicNull, InterferometerSettings
-from .statistics import pvr_fitter
+from .statistics import pvr_analyzer
 
 __all__ = ["AdoptedAperture", "ApertureConfirming", "ApertureKeeper", "null_waves"]
 
@@ -66,7 +66,8 @@ class AdoptedAperture:
         :data:`~.quality.RIM` on those left out (module notes).
     components : (ndarray of int32, int)
         Labels of the connected components of the fitted pixels (4-connectivity) and their count + 1.
-    pvr_fitter : Fitter or None
+    pvr : RobustPVAnalyzer or None
+        Evans' PVr on the fitted pixels (None where the 36 terms cannot be fitted there).
     null_waves : ndarray or None
         The null test's wavefront on the fit grid, waves.
     """
@@ -76,7 +77,7 @@ class AdoptedAperture:
     edge: EdgeCircle | None
     marks: NDArray[np.uint8]
     components: tuple[NDArray[np.int32], int]
-    pvr_fitter: Fitter | None
+    pvr: RobustPVAnalyzer | None
     null_waves: NDArray[np.float64] | None
 
     @property
@@ -175,7 +176,7 @@ class ApertureKeeper:
         count, labels = cv2.connectedComponents(fitted.view(np.uint8), connectivity=4, ltype=cv2.CV_32S)
         null = None if s.null is None else null_waves(grid, s.null)
         return AdoptedAperture(aperture, choice, edge, marks, (labels, count),
-                               pvr_fitter(grid, fitted, s.fit.remove, s.fit.dtype), null)
+                               pvr_analyzer(fitted, s.fit.remove, s.fit.dtype), null)
 
     def _classify(self, state: ApertureState, aperture: Aperture) -> tuple[ApertureEvent, str | None]:
         """What a full detection shows against the aperture in use and the pending one."""

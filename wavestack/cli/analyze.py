@@ -25,23 +25,28 @@ from wavestack.cli.arguments import finite_float, positive_finite_float, unit_fr
 from wavestack.cli.fit import MODES_ARGUMENT, fit_view
 from wavestack.figures import write_fit_figure
 from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
+from wavestack.cli.surface_options import add_surface_arguments, measure_surface, surface_lines, surface_request
+from wavestack.cli.surface_options import wants_surface
 from wavestack.cli.command import Command
 from wavestack.cli.measured_map import ANALYZE_FLAGS, MapPixels, add_fit_method_argument, advised
 from wavestack.cli.measured_map import obscuration_report
 from wavestack.cli.measured_map import map_lines, map_report, read_map_wavefront, reject_unsupported
-from wavestack.pipeline import Aperture, IllConditionedBasis, InputError, available_methods, build_fitter
-from wavestack.pipeline import implied_conic_constant
+from wavestack.pipeline import Aperture, IllConditionedBasis, InputError, Pupil, SurfaceFigures
+from wavestack.pipeline import available_methods, build_fitter, implied_conic_constant
 from wavestack.pipeline import read_frame, read_frame_set
 from wavestack.pipeline.formats import MEASURED_MAP_SUFFIXES
 from wavestack.pipeline import mode_name
-from wavestack.pipeline.instrument import OUTSIDE, InterferometerOutcome, measure_map, measure_set
+from wavestack.pipeline.instrument import OUTSIDE, InterferometerOutcome, InterferometerSettings, measure_map
+from wavestack.pipeline.instrument import measure_set, null_waves
 
 
 def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the options of ``wavestack analyze``."""
     parser.add_argument("files", nargs="+", metavar="FILE", help="images (a phase-shifted set or one carrier frame), or one .dat/.datx/4D .h5")
     parser.add_argument("--config", metavar="STATION.toml",
-                        help="measure the frames with this station's [processing] settings (the numbers the station gives)")
+                        help="measure the files as this station measures its frames (the numbers the station "
+                             "gives): an interferometer's [processing], or a Shack-Hartmann station's "
+                             "[shack_hartmann] for one spot image")
     parser.add_argument("--method", choices=("psi", "aia", "pca", "carrier"),
                         help="psi: least squares with known steps; aia/pca: steps estimated from the data "
                              "(default: psi for several frames, carrier for one)")
@@ -70,12 +75,18 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--save-map", metavar="OUT.npy", help="save the analysed wavefront (waves, NaN outside and where left out)")
     parser.add_argument("--plot", metavar="OUT.png",
                         help="draw the measured, fitted and residual maps and the coefficients (PNG)")
+    parser.add_argument("--surface-factor", type=positive_finite_float, default=0.5, metavar="F",
+                        help="interferograms: surface height per wavefront for the surface figures (0.5: a "
+                             "surface in reflection at normal incidence; a measured map is already surface)")
     add_aperture_arguments(parser)
+    add_surface_arguments(parser)
     add_shack_hartmann_arguments(parser)
 
 
-def _measure(args: argparse.Namespace) -> tuple[argparse.Namespace, InterferometerOutcome, float, MapPixels | None]:
-    """The files measured: (the options with their defaults, the outcome, the wavelength in nm, a map's pixel counts)."""
+def _measure(args: argparse.Namespace) -> tuple[argparse.Namespace, InterferometerOutcome, float, MapPixels | None,
+                                                InterferometerSettings]:
+    """The files measured: (the options with their defaults, the outcome, the wavelength in nm, a map's pixel
+    counts, the settings measured with)."""
     paths = [Path(p) for p in args.files]
     reject_unsupported(paths)
     if {p.suffix.lower() for p in paths} & set(MEASURED_MAP_SUFFIXES):
@@ -91,7 +102,7 @@ def _measure(args: argparse.Namespace) -> tuple[argparse.Namespace, Interferomet
             outcome = measure_map(measured.waves, measured.aperture, measured.valid, settings)
         except IllConditionedBasis as error:
             raise advised(error, args.files[0], ANALYZE_FLAGS) from None
-        return args, outcome, wavelength, pixels
+        return args, outcome, wavelength, pixels, settings
     config = station_config(args)
     if config is None:
         args = with_defaults(args)
@@ -108,7 +119,7 @@ def _measure(args: argparse.Namespace) -> tuple[argparse.Namespace, Interferomet
         if isinstance(outcome.error, IllConditionedBasis):
             raise advised(outcome.error, args.files[0], ANALYZE_FLAGS)
         raise InputError(f"{_subject(args)}: {outcome.reason}")
-    return args, outcome, wavelength, None
+    return args, outcome, wavelength, None, settings
 
 
 def _implied_conic(args: argparse.Namespace, outcome: InterferometerOutcome, wavelength_nm: float,
@@ -133,7 +144,7 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         return _spot_image(args)
     save_to = check_output_file(args.save_map, "--save-map") if args.save_map else None
     plot_to = check_output_file(args.plot, "--plot") if args.plot else None
-    args, outcome, wavelength_nm, pixels = _measure(args)
+    args, outcome, wavelength_nm, pixels, settings = _measure(args)
     fit, choice = outcome.fit, outcome.choice
     assert fit is not None and choice is not None and fit.residual_map is not None
     fitter = choice.fitter
@@ -144,8 +155,9 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     report = _report(args, outcome, wavelength_nm, float(np.nanstd(analysed)))
     _implied_conic(args, outcome, wavelength_nm, report)
     map_report(report, pixels, fit.valid_count)
+    surface, report["surface"] = _surface_figures(args, outcome, settings, wavelength_nm, pixels, fitter.basis.pupil)
     if plot_to is not None:
-        write_fit_figure(fit_view(_subject(args), "waves", fitter, fit), plot_to)
+        write_fit_figure(fit_view(_subject(args), "waves", fitter, fit, surface), plot_to)
     print(json_text(report) if args.json else _format(report))
     return 0
 
@@ -185,10 +197,34 @@ def _report(args: argparse.Namespace, outcome: InterferometerOutcome, wavelength
     return report
 
 
+def _surface_figures(args: argparse.Namespace, outcome: InterferometerOutcome, settings: InterferometerSettings,
+                     wavelength_nm: float, pixels: MapPixels | None,
+                     pupil: Pupil) -> tuple[SurfaceFigures | None, dict[str, Any]]:
+    """The surface figures of the analysed map: nm of surface on the pixels the fit used (before ``--remove``).
+
+    The map is the fit's (less a null test's wavefront), on the fit grid. A measured map's
+    nanometres are already the instrument's surface; an interferogram's wavefront becomes surface
+    by ``--surface-factor``. The pixel pitch is ``--pixel-mm`` (a camera pixel; times the fit
+    grid's decimation), else the file's, else ``--diameter-mm`` over the pupil's diameter in pixels.
+    """
+    assert outcome.waves is not None and outcome.flags is not None
+    waves = outcome.waves
+    if settings.null is not None:
+        waves = waves - null_waves(Aperture.from_mask(outcome.flags != OUTSIDE), settings.null)
+    factor = 1.0 if outcome.method == "file" else args.surface_factor
+    valid = np.isfinite(waves)
+    pixel_mm = None if args.pixel_mm is None else args.pixel_mm * settings.fit_decimation
+    if pixel_mm is None and pixels is not None:
+        pixel_mm = pixels.pitch_mm
+    if pixel_mm is None and args.diameter_mm is not None:
+        pixel_mm = args.diameter_mm / (2.0 * pupil.radius)
+    surface_nm = np.where(valid, waves * wavelength_nm * factor, np.nan)
+    return measure_surface(_subject(args), surface_nm, valid, surface_request(args), pixel_mm,
+                           asked=wants_surface(args))
+
+
 def _spot_image(args: argparse.Namespace) -> int:
     """A Shack-Hartmann spot image, once the interferogram-only options are known to be absent."""
-    if args.config is not None:
-        raise InputError(f"{args.files[0]}: --config applies to interferograms, not to a Shack-Hartmann spot image")
     args = with_defaults(args)
     if args.mask is not None or args.aperture != "detected":
         raise InputError(f"{args.files[0]}: --aperture and --mask apply to interferograms, not to a "
@@ -196,6 +232,9 @@ def _spot_image(args: argparse.Namespace) -> int:
     if args.plot is not None:
         raise InputError(f"{args.files[0]}: --plot draws interferograms and measured maps, not a "
                          "Shack-Hartmann spot image; expected --plot without the Shack-Hartmann options")
+    if wants_surface(args):
+        raise InputError(f"{args.files[0]}: the surface figures (--spec, --psd, --slope-length-mm, --filter) apply to "
+                         "interferograms and measured maps, not to a Shack-Hartmann spot image")
     return run_shack_hartmann(args)
 
 
@@ -226,6 +265,7 @@ def _format(report: dict[str, Any]) -> str:
         quality_text(report["quality"]),
     ]
     lines += map_lines(report)
+    lines += surface_lines(report["surface"])
     if "implied_conic" in report:
         lines.append(f"conic       measured Z11 {report['measured_spherical_waves']:.4f} waves implies K = {report['implied_conic']:.3f}"
                      + (f"; null for K = {report['null_conic']} subtracted" if "null_conic" in report else ""))

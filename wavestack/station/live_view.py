@@ -15,6 +15,7 @@ import numpy as np
 from wavestack.pipeline.instrument import PixelQuality
 from wavestack.station.counters import Counters
 from wavestack.station.results import StationResult
+from wavestack.station.surface_stage import SurfaceRecord
 
 _TREND_THRESHOLD = 1e-3  # waves; smaller changes show as steady
 
@@ -37,6 +38,7 @@ class LiveSnapshot:
     residual: tuple[float, float] | None = None  # (rms, pv) of the last valid result's fit residual, waves
     figures: tuple[float, float] | None = None  # (pv, pvr) of the last valid result's wavefront, waves
     quality: PixelQuality | None = None  # what the last valid result's data-quality mask left out
+    surface: str | None = None  # the last surface figures and verdict, one line
 
 
 class LiveStats:
@@ -62,6 +64,7 @@ class LiveStats:
         self._residual: tuple[float, float] | None = None
         self._figures: tuple[float, float] | None = None
         self._quality: PixelQuality | None = None
+        self._surface: str | None = None
 
     def add(self, result: StationResult, now_ns: int) -> None:
         """Account for one result received at host time ``now_ns``."""
@@ -74,6 +77,8 @@ class LiveStats:
             self._residual = (result.residual_rms, result.residual_pv)
             self._figures = (result.pv, result.pvr)
             self._quality = result.quality
+            if result.surface is not None:
+                self._surface = surface_line(result.surface)
         else:
             self._last_reason = result.reason
         self._last = result
@@ -103,7 +108,7 @@ class LiveStats:
             latency_p99_ms=float(np.nanpercentile(latencies, 99)) if np.isfinite(latencies).any() else math.nan,
             counters=last.counters if last else None, aperture=aperture, fitter=fitter, leading=leading,
             truth_error_rms=last.truth_error_rms if last else None, last_reason=self._last_reason,
-            residual=self._residual, figures=self._figures, quality=self._quality,
+            residual=self._residual, figures=self._figures, quality=self._quality, surface=self._surface,
         )
 
 
@@ -131,6 +136,8 @@ def render_live_view(snapshot: LiveSnapshot, ordering: str) -> list[str]:
         lines.append(f"fit residual: rms {s.residual[0]:.4f}  pv {s.residual[1]:.4f} waves")
     if s.quality is not None:
         lines.append(quality_line(s.quality))
+    if s.surface is not None:
+        lines.append(s.surface)
     if s.truth_error_rms is not None:
         lines.append(f"error against the simulated truth: {s.truth_error_rms:.4f} waves rms")
     if s.last_reason:
@@ -143,6 +150,16 @@ def quality_line(quality: PixelQuality) -> str:
     q = quality
     return (f"pixels used {q.used} of {q.inside}: left out {q.excluded} (low modulation {q.low_modulation}, "
             f"saturated {q.saturated}, fringe order {q.untrusted_order}, clipped {q.clipped}, rim {q.rim})")
+
+
+def surface_line(record: SurfaceRecord) -> str:
+    """The live view's line of a result's surface figures: the verdict first, then SAG, IRR, RSI, PVr."""
+    form = record.form
+    verdict = "" if record.verdict is None else (
+        f"{record.verdict.tolerance.notation} {'PASS' if record.verdict.passed else 'FAIL'} "
+        f"(limiting {record.verdict.limiting.quantity})  ")
+    return (f"surface: {verdict}SAG {form.sag_nm:+.1f}  IRR {form.irr_nm:.1f}  RSI {form.rsi_nm:.1f}  "
+            f"RMSi {form.rmsi_nm:.2f}  PVr {record.pvr.pvr:.1f} nm")
 
 
 def counter_lines(counters: Counters | None) -> list[str]:

@@ -13,23 +13,12 @@ import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Union
 
-from wavestack.pipeline.instrument import ApertureRecord, FitDiagnostics, PixelQuality
+from wavestack.pipeline.instrument import ApertureRecord, FitDiagnostics, PixelQuality, ReconstructorDiagnostics
 from wavestack.station.counters import Counters
+from wavestack.station.surface_stage import SurfaceRecord
 
 __all__ = ["ApertureRecord", "FitDiagnostics", "FitterDiagnostics", "Heartbeat", "OutputRecord",
            "ReconstructorDiagnostics", "SentCommand", "StationResult", "TruthErrors", "json_ready"]
-
-
-@dataclass(frozen=True)
-class ReconstructorDiagnostics:
-    """A Shack-Hartmann modal reconstructor's figures: condition number, lit and pupil lenslets."""
-
-    condition: float
-    lit_lenslets: int
-    pupil_lenslets: int
-
-    def to_json(self) -> dict[str, object]:
-        return asdict(self)
 
 
 FitterDiagnostics = Union[FitDiagnostics, ReconstructorDiagnostics]
@@ -188,6 +177,9 @@ class StationResult:
         this figure grows with that, not with an error of the pixels used.
     output : OutputRecord or None
         What went to the PLC: ``sent`` (bool), ``status`` flags, ``command_id``.
+    surface : SurfaceRecord or None
+        With ``[surface] enabled``: the ISO form figures, PVr and the drawing's verdict of the
+        measured surface (nm), on valid interferometer results.
     """
 
     index: int
@@ -215,6 +207,7 @@ class StationResult:
     pv: float = float("nan")
     pvr: float = float("nan")
     quality: PixelQuality | None = None
+    surface: SurfaceRecord | None = None
 
     @classmethod
     def invalid(cls, index: int, reason: str, counters: Counters, *, ordering: str,
@@ -241,6 +234,7 @@ class StationResult:
         values["aperture"] = {} if self.aperture is None else self.aperture.to_json()
         values["output"] = None if self.output is None else self.output.to_json()
         values["quality"] = {} if self.quality is None else self.quality.to_json()
+        values["surface"] = None if self.surface is None else self.surface.to_json()
         return {"type": "result", **json_ready(values)}
 
 

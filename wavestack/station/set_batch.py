@@ -1,8 +1,8 @@
 """Sets of a recording processed with one batched refit per run of sets that share a fitter.
 
-:meth:`SetProcessor.prepare` runs the stages before the fit set after set (they carry state);
+:meth:`~wavestack.pipeline.instrument.InterferometerProcessor.prepare` runs the stages before the fit set after set (they carry state);
 the prepared maps that share a fitter are then fitted together by ``Fitter.fit_many`` and each
-finished by :meth:`SetProcessor.finish`. A run (a *group*) ends where the fitter changes, where a
+finished by :meth:`~wavestack.pipeline.instrument.InterferometerProcessor.finish`. A run (a *group*) ends where the fitter changes, where a
 set adopts a new aperture, at a set that could not be read, at :data:`GROUP_SETS` maps, and at
 the end: so the groups, and therefore the numbers, depend only on the sets since the last
 adoption, and a block of a recording that starts at an adoption is fitted exactly as the same
@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from wavestack.pipeline import FitResult, InvalidFrame
 from wavestack.pipeline.instrument import InterferometerOutcome, InterferometerProcessor, PreparedSet
-from wavestack.station.shack_hartmann import SlopeOutcome, SlopeProcessor
+from wavestack.pipeline.instrument import ShackHartmannProcessor, SlopeOutcome
 
 #: Most maps fitted in one batch (~256 kB each on the small station's fit grid).
 GROUP_SETS: Final = 16
@@ -49,7 +49,7 @@ class SetBatch(Generic[Tag]):
 
     Parameters
     ----------
-    processor : InterferometerProcessor or SlopeProcessor
+    processor : InterferometerProcessor or ShackHartmannProcessor
     group_sets : int
         Most maps per batched fit.
     batched : bool
@@ -67,7 +67,7 @@ class SetBatch(Generic[Tag]):
             ...
     """
 
-    def __init__(self, processor: InterferometerProcessor | SlopeProcessor, *, group_sets: int = GROUP_SETS,
+    def __init__(self, processor: InterferometerProcessor | ShackHartmannProcessor, *, group_sets: int = GROUP_SETS,
                  batched: bool = True) -> None:
         if group_sets < 1:
             raise ValueError(f"group_sets: expected at least 1, got {group_sets}")

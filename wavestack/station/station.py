@@ -2,10 +2,11 @@
 
 One pipeline thread (the caller's) takes the newest set from the source and runs one cycle, one
 way, one value per arrow: the processor (the pipeline's
-:class:`~wavestack.pipeline.PhaseShiftingProcessor` or :class:`~wavestack.pipeline.CarrierProcessor`
-for an interferometer, given the station's :class:`~wavestack.station.fitter_cache.FitterCache` as
-its fitter source; a :class:`~wavestack.station.shack_hartmann.SlopeProcessor` for a Shack-Hartmann
-sensor) returns a frozen outcome; :func:`~wavestack.station.cycle.make_result` makes the
+:class:`~wavestack.pipeline.instrument.PhaseShiftingProcessor` or
+:class:`~wavestack.pipeline.instrument.CarrierProcessor` for an interferometer, given the station's
+:class:`~wavestack.station.fitter_cache.FitterCache` as its fitter source; a
+:class:`~wavestack.pipeline.instrument.ShackHartmannProcessor` for a Shack-Hartmann sensor) returns a
+frozen outcome; :func:`~wavestack.station.cycle.make_result` makes the
 :class:`~wavestack.station.results.StationResult`; the output stage sends it through the safety
 stage to the PLC (with a heartbeat each cycle, so a stalled pipeline is a dead host to the PLC's
 watchdog) and returns what it sent; every sink gets one
@@ -46,6 +47,7 @@ from wavestack.drivers.ring import WaitTimeout
 from wavestack.drivers.role_thread import RoleThread
 from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
+from wavestack.station.surface_stage import surface_stage
 from wavestack.station.devices import StationDevices, phase_steps_rad, reconnect_devices
 from wavestack.pipeline.instrument import (
     CarrierProcessor,
@@ -60,14 +62,14 @@ from wavestack.station.heap import HeapRelease
 from wavestack.station.latency import LatencyHistogram
 from wavestack.station.outputs import PlcOutput
 from wavestack.station.results import StationResult, json_ready
-from wavestack.station.shack_hartmann import SlopeOutcome, SlopeProcessor
+from wavestack.pipeline.instrument import ShackHartmannProcessor, SlopeOutcome
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["ResultSink", "Station", "StationSummary", "build_processor", "interferometer_settings"]
 
-Processor = Union[PhaseShiftingProcessor, CarrierProcessor, SlopeProcessor]
+Processor = Union[PhaseShiftingProcessor, CarrierProcessor, ShackHartmannProcessor]
 
 _MAX_WAIT_SLICE_S = 0.25  # longest wait between looks at the stop event (and heartbeats, when shorter)
 _FIRST_BACKOFF_S = 0.05
@@ -144,6 +146,7 @@ class Station:
         self._last_counters = self._retired  # the last snapshot that added up
         self._not_back = DeviceDisconnected(devices.camera.name, "acquisition not started")  # while no source
         self._output: PlcOutput | None = None
+        self._surface = surface_stage(config)
         self._slice_s = _MAX_WAIT_SLICE_S
         self._heap = HeapRelease(config.station.heap_release_s)
         if devices.link is not None and config.plc is not None:
@@ -270,11 +273,13 @@ class Station:
                              counters=counters, now_ns=time.time_ns(), truth=errors)
         if miscount is not None:  # never a wrong number, never a dead station: an invalid result
             result = replace(result, valid=False, reason=miscount)
+        waves = None if isinstance(outcome, SlopeOutcome) else outcome.waves
+        if self._surface is not None and result.valid and waves is not None:  # before the PLC: it shows them
+            result = replace(result, surface=self._surface.record(index, waves))
         sent = self._output.send(result) if self._output is not None else None
         slopes = isinstance(outcome, SlopeOutcome)
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
-                           outcome.lenslets if slopes else None, None if slopes else outcome.waves,
-                           None if slopes else outcome.flags)
+                           outcome.lenslets if slopes else None, waves, None if slopes else outcome.flags)
 
     def _recover(self, stop: threading.Event, wait_s: float, *, force_camera: bool) -> None:
         """After a device fault: retire the source, back off, bring the devices back, start a new source.
@@ -357,6 +362,6 @@ def build_processor(config: StationConfig, fitters: FitterSource | None = None) 
     """
     if config.station.kind == "shack-hartmann":
         assert config.shack_hartmann is not None  # parse_station_config requires [shack_hartmann]
-        return SlopeProcessor(config.shack_hartmann, wavelength_nm=config.station.wavelength_nm)
+        return ShackHartmannProcessor(config.shack_hartmann.setup(config.station.wavelength_nm))
     settings = interferometer_settings(config)
     return processor_for(settings, fitters if fitters is not None else SyncFitterSource(settings.fit))
