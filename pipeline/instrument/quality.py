@@ -30,8 +30,10 @@ never in a statistic. :class:`PixelQuality` counts them; the flags map says whic
 The counts are the instrument's, not the interferometer's: a Shack-Hartmann processor counts its
 lenslets (samples) the same way.
 
-Cost: two compiled walks over the fit grid (the signal, then the jumps) and, only when a jump was
-found, one labelling of the regions between them (OpenCV). See ``benchmarks/bench_live_numbers.py``.
+Cost: one look at each frame's peak (a set that saturates nowhere needs nothing more; else the
+frames' maximum on the fit grid), two compiled walks over the fit grid (the signal, then the
+jumps) and, only when a jump was found, one labelling of the regions between them (OpenCV). See
+``benchmarks/bench_live_numbers.py``.
 """
 
 from __future__ import annotations
@@ -163,12 +165,9 @@ def mark_quality(phase: NDArray[np.float64], modulation: NDArray[np.floating], f
     >>> PixelQuality.of(mask.flags).untrusted_order, bool(np.isnan(mask.waves[2, 2]))  # it and its 4 neighbours
     (5, True)
     """
-    frames = tuple(np.ascontiguousarray(f) for f in frames)  # one array type for the compiled walk
-    full_scale = full_scale_of(frames, settings.saturation_counts)
     flags = np.empty(adopted.shape, dtype=np.uint8)
-    modulation = np.asarray(modulation)
-    _mark_signal(modulation, frames, step, adopted, float(settings.min_modulation), full_scale,
-                 math.isfinite(full_scale), flags)
+    _mark_signal(np.asarray(modulation), _saturated_on_grid(frames, step, adopted.shape, settings.saturation_counts),
+                 step, adopted, float(settings.min_modulation), flags)
     if settings.check_fringe_order and _mark_jumps(phase, adopted, flags):
         # the regions the jumps cut off: their order against the main body is not known
         linked = ((adopted == 0) & ((flags & UNTRUSTED_ORDER) == 0)).view(np.uint8)
@@ -179,9 +178,26 @@ def mark_quality(phase: NDArray[np.float64], modulation: NDArray[np.floating], f
     return QualityMask(flags, waves)
 
 
+def _saturated_on_grid(frames: Sequence[NDArray[np.generic]], step: int, shape: tuple[int, int],
+                       saturation_counts: float | None) -> NDArray[np.bool_]:
+    """Where a frame of the set reaches full scale, on the fit grid; shape (0, 0) when no frame does anywhere.
+
+    The frames' peaks are looked at first (one contiguous pass each, SIMD): a set that saturates
+    nowhere, the common case, costs no walk over the grid.
+    """
+    full_scale = full_scale_of(frames, saturation_counts)
+    if not math.isfinite(full_scale) or all(np.asarray(f).max() < full_scale for f in frames):
+        return np.zeros((0, 0), dtype=np.bool_)
+    peak = np.asarray(frames[0])[::step, ::step].copy()
+    for frame in frames[1:]:
+        np.maximum(peak, np.asarray(frame)[::step, ::step], out=peak)
+    return np.ascontiguousarray(peak[: shape[0], : shape[1]] >= full_scale)
+
+
 @numba.njit(nogil=True, cache=True)
-def _mark_signal(modulation, frames, step, adopted, fraction, full_scale, check_saturation, flags):  # type: ignore[no-untyped-def]
-    """The adoption's marks, then low modulation and saturation; returns how many fitted pixels were marked."""
+def _mark_signal(modulation, saturated, step, adopted, fraction, flags):  # type: ignore[no-untyped-def]
+    """The adoption's marks, then low modulation and saturation (``saturated`` on the fit grid, or
+    empty: none); returns how many fitted pixels were marked."""
     rows, cols = adopted.shape
     total = 0.0
     count = 0
@@ -191,6 +207,7 @@ def _mark_signal(modulation, frames, step, adopted, fraction, full_scale, check_
                 total += modulation[r * step, c * step]
                 count += 1
     level = fraction * total / max(count, 1)
+    check_saturation = saturated.shape[0] > 0
     marked = 0
     for r in range(rows):
         for c in range(cols):
@@ -198,11 +215,8 @@ def _mark_signal(modulation, frames, step, adopted, fraction, full_scale, check_
             if mark == 0:
                 if modulation[r * step, c * step] < level:
                     mark |= 1
-                if check_saturation:
-                    for frame in frames:
-                        if frame[r * step, c * step] >= full_scale:
-                            mark |= 2
-                            break
+                if check_saturation and saturated[r, c]:
+                    mark |= 2
                 if mark:
                     marked += 1
             flags[r, c] = mark
