@@ -70,7 +70,7 @@ from .shack_hartmann import (
     ShackHartmannState,
     SlopeOutcome,
 )
-from .statistics import MAX_CLIP_PASSES, MapStatistics, clip_spikes, map_pv, pvr_analyzer, robust_pv
+from .statistics import MapStatistics, clip_spikes, map_pv, pvr_analyzer, robust_pv
 from .streams import measure_map, measure_set, processor_for
 from .tracking import AdoptedAperture, ApertureConfirming, ApertureKeeper, null_waves
 
@@ -79,7 +79,6 @@ __all__ = [
     "FALLBACK_METHOD",
     "IMPOSSIBLE",
     "LOW_MODULATION",
-    "MAX_CLIP_PASSES",
     "MODAL",
     "OUTSIDE",
     "RIM",
