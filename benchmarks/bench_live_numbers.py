@@ -15,7 +15,8 @@ one extra sink that judges every valid result:
   0.0005-0.001 waves RMS on the default station);
 * **cost of the mask and the clip**: the processor's ``quality`` and ``clip`` stages against the
   whole processing of the result (the sum of its stages) and against the result period
-  (1 / rate), medians over the run (target: <= 5 %); also PV and PVr (``statistics``).
+  (1 / rate), medians over the run (target: <= 5 %); also PV and PVr (``statistics``), and the
+  median of every stage.
 
 The judging sink renders the truth map on the fit grid (a few ms at 512 x 512) on the station's
 thread, so the rate printed is a little below the station's own. BLAS is pinned to one thread as
@@ -64,6 +65,7 @@ class Judge:
     statistics_share: list[float] = field(default_factory=list)
     processing_ms: list[float] = field(default_factory=list)
     mask_ms: list[float] = field(default_factory=list)
+    stage_ms: dict[str, list[float]] = field(default_factory=dict)
     first_ns: int = 0
     last_ns: int = 0
 
@@ -87,6 +89,8 @@ class Judge:
         total = sum(stages.values())
         mask = stages.get("quality", 0.0) + stages.get("clip", 0.0)
         self.processing_ms.append(total)
+        for stage, ms in stages.items():
+            self.stage_ms.setdefault(stage, []).append(ms)
         self.mask_ms.append(mask)
         self.mask_share.append(mask / total)
         self.statistics_share.append(stages.get("statistics", 0.0) / total)
@@ -126,6 +130,7 @@ def _figures(judge: Judge, duration_s: float, config: StationConfig) -> dict[str
         "mask_and_clip_share_of_processing": spread(judge.mask_share),
         "mask_and_clip_share_of_period": float(np.median(judge.mask_ms)) / period_ms if judge.mask_ms else None,
         "statistics_share_of_processing": spread(judge.statistics_share), "result_period_ms": period_ms,
+        "stage_median_ms": {stage: float(np.median(ms)) for stage, ms in judge.stage_ms.items()},
     }
 
 
