@@ -14,7 +14,9 @@ face, stacked so that a lower topic never imports a higher one:
 * on top, :mod:`~wavestack.pipeline.instrument` (one processor per instrument kind, the signal
   path every command calls: ``process(frames) -> outcome``);
 * beside them, needing nothing but the root: :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
-  dwell grid and surface extension, dwell-time solvers).
+  dwell grid and surface extension, dwell-time solvers);
+* on top: :mod:`~wavestack.pipeline.surface` (ISO form figures and tolerances, PVr, PSD, slope,
+  areal filters: the figures a drawing tolerances).
 
 Private pieces shared across topics live at this root (``_angles``, ``_checks``).
 """
@@ -116,6 +118,23 @@ from .instrument import (
     ShackHartmannProcessor,
     ShackHartmannSetup,
     SlopeOutcome,
+)
+from .surface import (
+    ArealFilter,
+    FormAnalyzer,
+    FormFigures,
+    FormTolerance,
+    RobustPVAnalyzer,
+    SurfaceAnalyzer,
+    SurfaceFigures,
+    SurfaceRequest,
+    ToleranceError,
+    filter_surface,
+    measured_area,
+    parse_areal_filter,
+    parse_form_tolerance,
+    slope_maps,
+    surface_psd,
 )
 from .zernike import (
     ConicTest,
@@ -258,4 +277,19 @@ __all__ = [
     "ShackHartmannProcessor",
     "ShackHartmannSetup",
     "SlopeOutcome",
+    "ArealFilter",
+    "FormAnalyzer",
+    "FormFigures",
+    "FormTolerance",
+    "RobustPVAnalyzer",
+    "SurfaceAnalyzer",
+    "SurfaceFigures",
+    "SurfaceRequest",
+    "ToleranceError",
+    "filter_surface",
+    "measured_area",
+    "parse_areal_filter",
+    "parse_form_tolerance",
+    "slope_maps",
+    "surface_psd",
 ]

@@ -44,6 +44,16 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.polishing.machine_program",  # MachineProgram
     "wavestack.pipeline.polishing.program",  # plan_program
     "wavestack.pipeline.polishing.program_checks",  # check_program
+    "wavestack.pipeline.surface.tolerance",  # parse_form_tolerance, FormTolerance
+    "wavestack.pipeline.surface.form",  # FormAnalyzer
+    "wavestack.pipeline.surface.radial",  # RadialModel
+    "wavestack.pipeline.surface.robust_pv",  # RobustPVAnalyzer
+    "wavestack.pipeline.surface.psd",  # surface_psd
+    "wavestack.pipeline.surface.power_law",  # fit_power_law
+    "wavestack.pipeline.surface.slope",  # slope_maps
+    "wavestack.pipeline.surface.areal_filter",  # filter_surface, parse_areal_filter
+    "wavestack.pipeline.surface.compliance",  # check_form
+    "wavestack.pipeline.surface.figures",  # SurfaceAnalyzer
 )
 
 

@@ -39,11 +39,14 @@ class MapPixels:
     outside_outline : int
         Measured pixels the outline detection alone would have cut (isolated pixels, rim
         spurs); they are fitted and inside the reported aperture.
+    pitch_mm : float or None
+        The file's pixel pitch (lateral resolution), mm; None when it does not say.
     """
 
     measured: int
     dropouts: int
     outside_outline: int
+    pitch_mm: float | None = None
 
     def as_dict(self, fitted: int) -> dict[str, int]:
         """JSON form, with the count of pixels that entered the fit."""
@@ -99,6 +102,7 @@ def read_map_wavefront(path: Path, wavelength_nm: float | None) -> tuple[Measure
         measured=int(valid.sum()),
         dropouts=int(np.count_nonzero(outline & ~valid)),
         outside_outline=int(np.count_nonzero(valid & ~detected)),
+        pitch_mm=data.pixel_size_m * 1e3 if data.pixel_size_m and data.pixel_size_m > 0 else None,
     )
     waves = np.where(valid, data.map_nm / wavelength, np.nan)
     # a hole the join leaves (a drop-out next to the edge, which the opening cut open) is a drop-out too:

@@ -43,6 +43,7 @@ from typing import Any
 from wavestack.config._checks import BIT_DEPTH
 from wavestack.config.camera import CameraSimulatorSettings, parse_camera_config
 from wavestack.config.schema import ConfigError, load_toml, parse_section
+from wavestack.config.surface import SurfaceSettings
 from wavestack.config.plc import parse_plc_config
 from wavestack.config.pzt import parse_pzt_config
 from wavestack.simulators.bench import PiezoCoupling
@@ -54,9 +55,9 @@ from wavestack.config.station_rules import check_station_rules
 from wavestack.config.station_schema import OutputSettings, StationConfig, StationSettings
 
 _TABLES = ("station", "processing", "camera", "pzt", "plc", "outputs", "optic", "bench", "shack_hartmann",
-           "lenslets")
+           "lenslets", "surface")
 _SHACK_HARTMANN_ONLY = ("shack_hartmann", "lenslets")
-_INTERFEROMETER_ONLY = ("processing", "pzt", "bench")
+_INTERFEROMETER_ONLY = ("processing", "pzt", "bench", "surface")
 #: The simulated station, shipped inside the package (the one default station file).
 DEFAULT_CONFIG = Path(__file__).resolve().parent / "default.toml"
 
@@ -113,7 +114,9 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         pzt=pzt, pzt_simulator=pzt_simulator, plc=plc,
         outputs=_section(OutputSettings, document, "outputs", source),
         optic=optic, bench=_section(PiezoCoupling, document, "bench", source),
+        surface=_section(SurfaceSettings, document, "surface", source),
     )
+    config.surface.request(source)  # a tolerance that cannot be read is refused with the file
     check_station_rules(config)
     return config
 

@@ -13,6 +13,7 @@ from typing import Any, Union
 
 from wavestack.pipeline.instrument import ApertureRecord, ReconstructorDiagnostics
 from wavestack.station.counters import Counters
+from wavestack.station.surface_stage import SurfaceRecord
 
 
 @dataclass(frozen=True)
@@ -171,6 +172,9 @@ class StationResult:
         aperture in the fitted subspace, waves.
     output : OutputRecord or None
         What went to the PLC: ``sent`` (bool), ``status`` flags, ``command_id``.
+    surface : SurfaceRecord or None
+        With ``[surface] enabled``: the ISO form figures, PVr and the drawing's verdict of the
+        measured surface (nm), on valid interferometer results.
     """
 
     index: int
@@ -195,6 +199,7 @@ class StationResult:
     truth_rms: float | None = None
     truth_error_rms: float | None = None
     output: OutputRecord | None = None
+    surface: SurfaceRecord | None = None
 
     @classmethod
     def invalid(cls, index: int, reason: str, counters: Counters, *, ordering: str,
@@ -220,6 +225,7 @@ class StationResult:
         values["fitter_diagnostics"] = {} if self.fitter_diagnostics is None else self.fitter_diagnostics.to_json()
         values["aperture"] = {} if self.aperture is None else self.aperture.to_json()
         values["output"] = None if self.output is None else self.output.to_json()
+        values["surface"] = None if self.surface is None else self.surface.to_json()
         return {"type": "result", **json_ready(values)}
 
 

@@ -44,6 +44,7 @@ from wavestack.drivers.ring import WaitTimeout
 from wavestack.drivers.role_thread import RoleThread
 from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
+from wavestack.station.surface_stage import surface_stage
 from wavestack.station.devices import StationDevices, phase_steps_rad, reconnect_devices
 from wavestack.station.interferometer import SetProcessor
 from wavestack.station.heap import HeapRelease
@@ -131,6 +132,7 @@ class Station:
         self._last_counters = self._retired  # the last snapshot that added up
         self._not_back = DeviceDisconnected(devices.camera.name, "acquisition not started")  # while no source
         self._output: PlcOutput | None = None
+        self._surface = surface_stage(config)
         self._slice_s = _MAX_WAIT_SLICE_S
         self._heap = HeapRelease(config.station.heap_release_s)
         if devices.link is not None and config.plc is not None:
@@ -256,10 +258,12 @@ class Station:
                              counters=counters, now_ns=time.time_ns(), truth=errors)
         if miscount is not None:  # never a wrong number, never a dead station: an invalid result
             result = replace(result, valid=False, reason=miscount)
+        waves = None if isinstance(outcome, SlopeOutcome) else outcome.waves
+        if self._surface is not None and result.valid and waves is not None:  # before the PLC: it shows them
+            result = replace(result, surface=self._surface.record(index, waves))
         sent = self._output.send(result) if self._output is not None else None
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
-                           outcome.lenslets if isinstance(outcome, SlopeOutcome) else None,
-                           None if isinstance(outcome, SlopeOutcome) else outcome.waves)
+                           outcome.lenslets if isinstance(outcome, SlopeOutcome) else None, waves)
 
     def _recover(self, stop: threading.Event, wait_s: float, *, force_camera: bool) -> None:
         """After a device fault: retire the source, back off, bring the devices back, start a new source.
