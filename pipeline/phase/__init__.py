@@ -1,15 +1,9 @@
-"""Phase: PSI and carrier demodulation, spatial and temporal unwrapping, and the measured wavefront."""
+"""Phase: PSI and carrier demodulation, the fringe signal, and spatial and temporal unwrapping."""
 
 from __future__ import annotations
 
 from .carrier import CarrierResult, carrier_phase
-from .measurement import (
-    MeasuredWavefront,
-    check_fringe_modulation,
-    local_fringe_contrast,
-    wavefront_from_carrier,
-    wavefront_from_phase_shifts,
-)
+from .fringe_signal import NO_MODULATION, check_fringe_modulation, contrast_box, fringe_energy
 from .psi import (
     PhaseResult,
     advanced_iterative_psi,
@@ -24,23 +18,22 @@ from .temporal_unwrap import TemporalUnwrapper, UnwrapResult
 
 __all__ = [
     "CarrierResult",
-    "MeasuredWavefront",
+    "NO_MODULATION",
     "PhaseResult",
     "SpatialParams",
     "TemporalUnwrapper",
     "UnwrapResult",
     "advanced_iterative_psi",
     "carrier_phase",
+    "contrast_box",
     "count_residues",
     "four_step",
+    "fringe_energy",
     "hariharan_five_step",
     "least_squares_psi",
-    "local_fringe_contrast",
     "pca_psi",
     "phase_from_frames",
     "unwrap_spatial",
-    "wavefront_from_carrier",
-    "wavefront_from_phase_shifts",
     "check_fringe_modulation",
     "wrap_phase",
 ]

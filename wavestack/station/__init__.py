@@ -1,9 +1,10 @@
 """The live station and the service the loops stand on: sources, devices, the result loop, outputs, sinks.
 
-A cycle runs one way, one value per arrow: frames -> a processor's frozen outcome
-(:class:`InterferometerOutcome` or :class:`~wavestack.pipeline.instrument.SlopeOutcome`) -> :func:`make_result`
-(pure) -> the output stage (the PLC), which returns an :class:`OutputRecord` -> one :class:`CycleRecord` for
-every sink.
+A cycle runs one way, one value per arrow: frames -> a processor's frozen outcome (the
+pipeline's :class:`~wavestack.pipeline.instrument.InterferometerOutcome` or
+:class:`~wavestack.pipeline.instrument.SlopeOutcome`) -> :func:`make_result` (pure) -> the
+output stage (the PLC), which returns an :class:`OutputRecord` -> one
+:class:`CycleRecord` for every sink.
 
 The service the applications (``polish``, ``align``, ``batch``) use: :class:`StationService`
 (the station on its own thread, its records to every sink), its averaged maps
@@ -13,19 +14,10 @@ The service the applications (``polish``, ``align``, ``batch``) use: :class:`Sta
 
 from __future__ import annotations
 
-from wavestack.station.aperture_confirmation import (
-    ApertureAction,
-    ApertureEvent,
-    AperturePhase,
-    ApertureState,
-    Detection,
-    confirm,
-)
 from wavestack.station.counters import Counters, FrameCounts, SetCounts
 from wavestack.station.cycle import CycleRecord, ProcessorOutcome, ResultSink, make_result, with_output
 from wavestack.station.devices import StationDevices, configure_camera, open_station_devices, phase_steps_rad
 from wavestack.station.fitter_cache import FALLBACK_METHOD, FitterCache, FitterChoice
-from wavestack.station.interferometer import CARRIER_REFRESH_SETS, InterferometerOutcome, PreparedSet, SetProcessor
 from wavestack.station.live_maps import LiveMaps, MapSample, UntrustedMeasurement, sample_of
 from wavestack.station.live_view import LiveSnapshot, LiveStats, counter_lines, render_live_view
 from wavestack.station.outputs import PlcOutput, start_up_hold
@@ -43,18 +35,18 @@ from wavestack.station.results import (
 )
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 from wavestack.station.service import StationService
-from wavestack.station.station import Station, StationSummary, build_processor
+from wavestack.station.station import Station, StationSummary, build_processor, interferometer_settings
 from wavestack.station.truth import TruthCheck, coefficient_errors
 
 __all__ = [
-    "ApertureAction", "ApertureEvent", "AperturePhase", "ApertureRecord", "ApertureState", "CARRIER_REFRESH_SETS",
-    "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
-    "FitterChoice", "FitterDiagnostics", "FrameCounts", "Heartbeat", "InterferometerOutcome",
-    "LiveMaps", "LiveSnapshot", "LiveStats", "MapSample", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet",
-    "ProcessorOutcome", "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetCounts",
-    "SetProcessor", "Station", "StationDevices", "StationResult", "StationService", "StationSummary", "TruthCheck",
-    "TruthErrors", "UntrustedMeasurement", "build_processor", "coefficient_errors", "configure_camera", "confirm",
-    "counter_lines", "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "render_live_view",
-    "sample_of",
+    "ApertureRecord",
+    "CarrierSource", "Counters", "CycleRecord", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
+    "FitterChoice", "FitterDiagnostics", "FrameCounts", "Heartbeat", "LiveMaps",
+    "LiveSnapshot", "LiveStats", "MapSample", "OutputRecord", "PhaseStepSource", "PlcOutput", "ProcessorOutcome",
+    "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetCounts",
+    "Station", "StationDevices", "StationResult", "StationService", "StationSummary", "TruthCheck",
+    "TruthErrors", "UntrustedMeasurement", "build_processor", "coefficient_errors", "configure_camera",
+    "counter_lines", "interferometer_settings", "json_ready", "make_result", "open_station_devices",
+    "phase_steps_rad", "render_live_view", "sample_of",
     "start_up_hold", "with_output",
 ]

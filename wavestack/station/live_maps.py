@@ -163,7 +163,8 @@ class LiveMaps:
                 max_results: int | None = None) -> NDArray[np.float64]:
         """The mean of ``count`` valid maps in a row exposed at or after ``not_before_ns``, waves (H, W).
 
-        ``max_results`` defaults to ``4 * count``.
+        ``max_results`` defaults to ``4 * count``. A pixel left out of a map (NaN: the quality mask) is
+        the mean of the maps that measured it; NaN if none did.
 
         Raises
         ------
@@ -172,4 +173,7 @@ class LiveMaps:
         """
         samples = self.collect(count, max_results=4 * count if max_results is None else max_results,
                                not_before_ns=not_before_ns, timeout_s=timeout_s, stop=stop)
-        return np.mean([np.asarray(s.waves, dtype=np.float64) for s in samples], axis=0)
+        maps = np.stack([np.asarray(s.waves, dtype=np.float64) for s in samples])
+        measured = np.isfinite(maps).sum(axis=0)  # a pixel the quality mask left out of a map: the others'
+        total = np.where(np.isfinite(maps), maps, 0.0).sum(axis=0)
+        return np.divide(total, measured, out=np.full(total.shape, np.nan), where=measured > 0)
