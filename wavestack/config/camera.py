@@ -4,7 +4,7 @@
 ``usb://SERIAL`` one by serial number, ``sim://u3v`` the simulated camera of a simulated
 bench (a pyusb backend the station builds itself, see :mod:`wavestack.simulators.bench`), and
 ``usbtcp://HOST:PORT[/SERIAL]`` a camera whose USB bus is served over TCP by another process
-(:mod:`wavestack.drivers.u3v.usb_tcp`: the remote alignment-bench simulator's camera).
+(:mod:`wavestack.drivers.usb_tcp`: the remote alignment-bench simulator's camera).
 ``[camera.simulator]`` describes that simulated camera. Example::
 
     [camera]
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from wavestack.config.schema import ConfigError, device_tables, parse_section, setting
-from wavestack.drivers.u3v.usb_tcp import parse_usbtcp_url
+from wavestack.drivers.usb_tcp import parse_usbtcp_url
 
 PixelFormat = Literal["Mono8", "Mono12", "Mono16"]
 

@@ -22,7 +22,7 @@ from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
 from wavestack.drivers.plc import CommandLimits, PolishingLink
 from wavestack.drivers.u3v import U3VCamera
-from wavestack.drivers.u3v.usb_tcp import UsbTcpBackend, parse_usbtcp_url
+from wavestack.drivers.usb_tcp import UsbTcpBackend, parse_usbtcp_url
 from wavestack.config import BIT_DEPTH, StationConfig, build_calibration, build_piezo, build_simulated_device
 from wavestack.simulators import attach_simulated_device, register_serial_simulators
 from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
@@ -156,12 +156,12 @@ def _truth_check(bench: SimulatedInterferometer | SimulatedShackHartmann | None,
     return None
 
 
-def _usb_backend(url: str, stack: ExitStack) -> UsbTcpBackend | None:
+def _usb_backend(url: str, stack: ExitStack, timeout_s: float) -> UsbTcpBackend | None:
     """The pyusb backend of a camera URL: libusb (None) for ``usb://``, the TCP bus for ``usbtcp://``."""
     if not url.startswith("usbtcp://"):
         return None
     host, port, _ = parse_usbtcp_url(url)
-    backend = UsbTcpBackend(host, port)
+    backend = UsbTcpBackend(host, port, io_timeout_s=timeout_s)
     stack.callback(backend.close)
     return backend
 
@@ -198,7 +198,7 @@ def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder:
             bench, piezo_device = simulated_interferometer(config)
         camera = U3VCamera.open(backend=bench.backend, timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
     else:
-        camera = U3VCamera.open(backend=_usb_backend(config.camera.url, stack), serial=config.camera.serial,
+        camera = U3VCamera.open(backend=_usb_backend(config.camera.url, stack, timeout), serial=config.camera.serial,
                                 timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
     stack.callback(camera.close)
     configure_camera(camera, config)
