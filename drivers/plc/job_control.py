@@ -5,7 +5,8 @@ gate. Every verb that moves the machine passes the same checks as a removal comm
 wire: not a monitor link, the self-check passed, the heartbeat echoed (the PLC is scanning, also
 since the last command or job write), not tripped, no e-stop, not busy (a pass, or a running job);
 and a load passes the :class:`~wavestack.drivers.plc.jobs.JobLimits` and the job-id ledger (an id
-is spent once announced, whatever the machine answers, so the host never re-sends a used id).
+is spent once this host announced it, whatever the machine answers, or once the machine reports it
+loaded or run; see :class:`~wavestack.drivers.plc.jobs.JobLedger`).
 
 A lost reply is harmless: the machine treats a LOAD identical to the loaded job, and a START of the
 job that is running or ended, as the same request (it never runs a job id twice); the link resends
@@ -95,10 +96,9 @@ class JobControl:
             return limits
 
     def next_job_id(self) -> int:
-        """A job id above every id this link used or the machine reported: never one used before.
+        """The next job id after this host's own: never one spent (:class:`~wavestack.drivers.plc.jobs.JobLedger`).
 
-        Call :meth:`read_machine` first on a new link (it learns the machine's last job id), and
-        :meth:`note_used_job_ids` with the ids of the job files already in the job folder.
+        Call :meth:`note_used_job_ids` first with the ids of the job files already in the job folder.
         """
         with self._lock:
             return self._jobs.next_id()
@@ -163,6 +163,7 @@ class JobControl:
             self._write_job(registers, deadline)
             status = self._await_machine(job_id, (MachineState.LOADED, MachineState.FAULT), deadline)
             if status.state is not MachineState.LOADED:
+                self._jobs.refused(status)
                 raise JobRejected(self._device, f"the machine refused job {job_id}: {status.describe()}", status)
             _log.info("%s: job %d loaded (%d points, CRC-32 %08x)", self._device, job_id, receipt.point_count,
                       receipt.crc32)
@@ -226,7 +227,7 @@ class JobControl:
         except ValueError as error:
             raise ProtocolError(self._device, f"machine block (registers {block.start}-{block.stop - 1}): "
                                 f"{error}") from None
-        self._jobs.saw(status.job_id)
+        self._jobs.saw(status)
         return status
 
     def _load_registers(self, receipt: JobReceipt, job_id: int) -> list[int]:
@@ -237,8 +238,8 @@ class JobControl:
             raise JobRefused(self._device, f"refusing to load job {job_id}: the receipt is for job "
                              f"{receipt.summary.job_id} ({receipt.path.name}); expected {name}")
         if self._jobs.used(job_id):
-            raise JobRefused(self._device, f"refusing to load job {job_id}: the id was used before (the highest "
-                             f"used or reported is {self._jobs.highest}); take next_job_id()")
+            raise JobRefused(self._device, f"refusing to load job {job_id}: the id is spent (announced by this host, "
+                             "in the job folder, or loaded or run by the machine); take next_job_id()")
         if self._job_limits is None:
             raise JobRefused(self._device, f"refusing to load job {job_id}: no job limits are set (restrict_jobs)")
         why = self._job_limits.violation(receipt.summary)

@@ -133,7 +133,7 @@ def test_estop_mid_run_aborts_keeps_the_partial_removal_and_the_id_is_spent(tmp_
         # the part polished so far stays polished: removal = executed dwell x the tool's volume rate
         expected = float(executed.sum()) * GaussianTool(0.6, 5.0, 0.1).volume_per_second_px()
         assert 0 < target.total_nm == pytest.approx(expected, rel=5e-4)
-        with pytest.raises(JobRefused, match="used before"):  # the host never re-sends it
+        with pytest.raises(JobRefused, match="spent"):  # the host never re-sends it
             link.load_job(_receipt_for(tmp_path, job), job_id)
         sim.faults.estop = False
         assert link.start_job(job_id).state is MachineState.ABORTED  # a retried start: reported, never re-run
@@ -245,3 +245,21 @@ def test_a_plc_restart_mid_run_ends_aborted_and_ids_move_on(tmp_path: Path) -> N
             fresh.connect(timeout_s=2.0)
             fresh.read_machine()
             assert fresh.next_job_id() == job_id + 1
+
+
+def test_a_refused_load_of_an_id_this_host_never_announced_spends_nothing(tmp_path: Path) -> None:
+    # issue 29, finding 1: one "LOAD 65535" (no file) used to make the host refuse every id, after a
+    # reconnect too. The machine refuses it (FAULT, job 65535): that id was never loaded or run.
+    with station(tmp_path) as (sim, link, _):
+        assert sim.machine is not None
+        sim.machine.load(65535, 0, 1, 1.0)
+        status = link.read_machine()
+        assert (status.state, status.job_id, status.reason) == (MachineState.FAULT, 65535, JobReason.FILE_MISSING)
+        job_id = link.next_job_id()
+        assert job_id == 1
+        link.load_job(write_job_file(tmp_path, make_job(job_id)), job_id)
+        link.start_job(job_id)
+        assert wait_for(lambda: link.read_machine().state is MachineState.DONE, beat=link)
+        link.close()  # a reconnect reads the machine again
+        link.read_machine()
+        assert link.next_job_id() == 2
