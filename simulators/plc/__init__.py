@@ -20,7 +20,8 @@ from wavestack.simulators.plc.job_state import JobEvent, JobState, StopReason, n
 from wavestack.simulators.plc.machine import MachineSimSettings, MachineSnapshot, PolishingMachine, RemovalTarget
 from wavestack.simulators.plc.machine_tif import GaussianTool
 from wavestack.simulators.plc.polishing import PolishingPass, PolishingStation, RemovalCommand
-from wavestack.simulators.plc.program import PlcSimLayout, PolishingPlcProgram, SimOutputs
+from wavestack.simulators.plc.layout import PlcSimLayout
+from wavestack.simulators.plc.program import PolishingPlcProgram, SimOutputs
 from wavestack.simulators.plc.server import PlcSimulator, RequestRecord
 from wavestack.simulators.plc.watchdog import HeartbeatWatchdog, WatchdogState
 

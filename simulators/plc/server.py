@@ -9,8 +9,10 @@ The server is a thin shell around :class:`~wavestack.simulators.plc.program.Poli
 - the server answers exactly as the register map says (:mod:`~wavestack.simulators.plc.access`): a
   function code the map never uses answers exception 1 when it is decoded, one the map uses for
   other registers (FC6 into the command block, a partial command write) exception 2;
-- the device ``action`` runs the program for every request: watchdog (exception 4 when tripped),
-  command handshake (exception 3 for refused parameters), status and outputs;
+- the device ``action`` runs the program for every request, with the number of the connection it
+  came on (each connection's request handler sets it, :class:`_Connection`): ownership (exception 1
+  for a write only the owner may make), watchdog (exception 4 when tripped), command handshake
+  (exception 3 for refused parameters), status and outputs;
 - :class:`SimFaults` switches: drop, truncate or corrupt replies through pymodbus's
   ``trace_packet`` hook (the request is still executed), delay replies in the action, freeze the
   heartbeat echo, press the e-stop; and :meth:`PlcSimulator.restart` for the server itself.
@@ -23,29 +25,72 @@ loop and joins the thread.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from contextvars import ContextVar
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from types import TracebackType
 
 from pymodbus.constants import ExcCodes
 from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusTcpServer
+from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import SimDevice
 
 from wavestack.simulators.plc.access import check_request, refusing_request_classes
 from wavestack.simulators.plc.faults import SimFaults
 from wavestack.simulators.plc.machine import PolishingMachine
 from wavestack.simulators.plc.polishing import PolishingStation
-from wavestack.simulators.plc.program import HISTORY_LENGTH, PlcSimLayout, PolishingPlcProgram, SimOutputs
+from wavestack.simulators.plc.layout import PlcSimLayout
+from wavestack.simulators.plc.program import HISTORY_LENGTH, PolishingPlcProgram, SimOutputs
 from wavestack.simulators.plc.watchdog import WatchdogState
 
 __all__ = ["PlcSimulator", "RequestRecord"]
 
 _log = logging.getLogger(__name__)
+
+#: The connection a request came on, set by its handler's task for the program's action.
+_CONNECTION: ContextVar[int] = ContextVar("plc_connection", default=0)
+
+
+class _Connection(ServerRequestHandler):
+    """pymodbus's handler of one connection, which tells the program which connection a request is from."""
+
+    def __init__(self, server: ModbusTcpServer, number: int, on_close: Callable[[int], None]) -> None:
+        self.number = number
+        self._on_close = on_close
+        trace_connect = server.trace_connect
+
+        def traced(connected: bool) -> None:
+            if trace_connect is not None:
+                trace_connect(connected)
+            if not connected:
+                on_close(number)
+        super().__init__(server, server.trace_packet, server.trace_pdu, traced)
+
+    async def handle_request(self) -> None:
+        token = _CONNECTION.set(self.number)  # each request runs in a task of its own: the value is its own
+        try:
+            await super().handle_request()
+        finally:
+            _CONNECTION.reset(token)
+
+
+class _Server(ModbusTcpServer):
+    """``ModbusTcpServer`` whose connections are numbered (:class:`_Connection`)."""
+
+    def __init__(self, *args: object, numbers: Iterator[int], on_close: Callable[[int], None],
+                 **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._numbers = numbers
+        self._on_close = on_close
+
+    def callback_new_connection(self) -> _Connection:
+        return _Connection(self, next(self._numbers), self._on_close)
 
 
 @dataclass(frozen=True)
@@ -107,7 +152,8 @@ class PlcSimulator:
         self._connections = 0
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._server: ModbusTcpServer | None = None
+        self._server: _Server | None = None
+        self._numbering = itertools.count(1)  # runs on across restarts: a new connection is never an old one
         self._stopping: asyncio.Event | None = None
         self._ready = threading.Event()
         self._startup_error: BaseException | None = None
@@ -270,9 +316,10 @@ class PlcSimulator:
         await self._close()
 
     async def _open(self) -> None:
-        server = ModbusTcpServer(self._device, address=(self._host, self._port), trace_packet=self._trace_packet,
-                                 trace_pdu=self._trace_pdu, trace_connect=self._trace_connect,
-                                 custom_pdu=refusing_request_classes(self.layout))
+        server = _Server(self._device, address=(self._host, self._port), trace_packet=self._trace_packet,
+                         trace_pdu=self._trace_pdu, trace_connect=self._trace_connect,
+                         custom_pdu=refusing_request_classes(self.layout), numbers=self._numbering,
+                         on_close=self.program.connection_closed)
         await server.serve_forever(background=True)
         self._server = server
         sockets = getattr(server.transport, "sockets", None) or ()
@@ -331,4 +378,4 @@ class PlcSimulator:
         if refusal is not None:
             return refusal
         written = [int(v) for v in set_values] if set_values is not None else None
-        return self.program.on_request(address, written, self._clock(), start_address, registers)
+        return self.program.on_request(address, written, self._clock(), start_address, registers, _CONNECTION.get())

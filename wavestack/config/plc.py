@@ -28,7 +28,7 @@ from wavestack.drivers.plc.register_map import RegisterMap
 from wavestack.drivers.plc.transport import LinkTiming
 from wavestack.simulators.plc.machine import MachineSimSettings, PolishingMachine, RemovalTarget
 from wavestack.simulators.plc.polishing import PolishingStation
-from wavestack.simulators.plc.program import PlcSimLayout
+from wavestack.simulators.plc import PlcSimLayout
 
 __all__ = ["MachineModelSettings", "PlcConfig", "PlcLinkSettings", "PlcSimulatorSettings", "PolishingModelSettings",
            "load_plc_config", "parse_plc_config"]
@@ -75,6 +75,8 @@ class PlcLinkSettings:
                                        doc="first of 8 registers: job action, id, CRC-32, points, total dwell")
     machine_register: int | None = setting(320, minimum=0, maximum=65529,
                                            doc="first of 7 read-only registers: state, reason, job id, progress")
+    owner_register: int | None = setting(12, minimum=0, maximum=65532,
+                                         doc="first of 4 registers: the host's ownership token (FC16, whole)")
     job_folder: str | None = setting(None, doc="where the host writes job files (the machine's share)")
     job_max_points: int = setting(500_000, minimum=1, maximum=2**32 - 1, doc="most points in one job")
     job_max_total_dwell_s: float = setting(36_000.0, minimum=0.001, maximum=1e7, doc="longest total dwell, s")
@@ -114,7 +116,7 @@ class PlcLinkSettings:
             block_write_function=self.command_write_function_code,
             self_check_word_order=self.self_check_word_order, command_word_order=self.command_word_order,
             output_word_order=self.output_word_order, job_register=self.job_register,
-            machine_register=self.machine_register)
+            machine_register=self.machine_register, owner_register=self.owner_register)
 
     def job_limits(self) -> JobLimits:
         """The host's job limits (raises ValueError for an empty travel)."""
@@ -203,7 +205,8 @@ class PlcConfig:
             watchdog_timeout_s=link.watchdog_timeout_s,
             read_function=link.read_function_code, single_write_function=link.single_write_function_code,
             pass_duration_s=self.simulator.polishing.pass_duration_s if self.simulator else 0.0,
-            job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order)
+            job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order,
+            owner_register=link.owner_register)
 
     def machine_settings(self, job_folder: str | Path | None = None) -> MachineSimSettings:
         """The simulated machine's settings from ``[plc.simulator.machine]`` (defaults if absent).

@@ -43,7 +43,7 @@ class RecordingTarget:
 
 def layout(watchdog_timeout_s: float) -> PlcSimLayout:
     return PlcSimLayout(unit_id=1, self_check_register=0, self_check_value=12345.678, self_check_word_order="CDAB",
-                        heartbeat_register=10, rearm_register=11, status_register=20, command_block=(100, 10),
+                        heartbeat_register=10, rearm_register=11, owner_register=12, status_register=20, command_block=(100, 10),
                         output_block=(200, 10), command_word_order="CDAB", output_word_order="CDAB",
                         watchdog_timeout_s=watchdog_timeout_s, job_register=JOB_REGISTER,
                         machine_register=MACHINE_REGISTER)
@@ -51,7 +51,7 @@ def layout(watchdog_timeout_s: float) -> PlcSimLayout:
 
 def register_map() -> RegisterMap:
     return RegisterMap.build(unit_id=1, word_order="CDAB", self_check_register=0, self_check_value=12345.678,
-                             heartbeat_register=10, rearm_register=11, status_register=20, command_block=(100, 10),
+                             heartbeat_register=10, rearm_register=11, owner_register=12, status_register=20, command_block=(100, 10),
                              output_block=(200, 10), job_register=JOB_REGISTER, machine_register=MACHINE_REGISTER)
 
 
@@ -147,15 +147,17 @@ def _receipt_for(folder: Path, job: JobFile):  # noqa: ANN202
 
 
 def test_a_used_id_sent_by_another_host_is_refused_by_the_machine(tmp_path: Path) -> None:
-    with station(tmp_path) as (sim, link, _):
+    with station(tmp_path, watchdog_timeout_s=1.0) as (sim, link, _):
         job = make_job(1)
         receipt = write_job_file(tmp_path, job)
         link.load_job(receipt, 1)
         link.start_job(1)
         assert wait_for(lambda: link.read_machine().state is MachineState.DONE, beat=link)
+        link.close()  # that host goes away; its watchdog trips and the PLC is nobody's until re-armed
+        assert wait_for(lambda: sim.watchdog_state.name == "TRIPPED")
         second = PolishingLink("127.0.0.1", sim.port, register_map(), TIMING, job_limits=LIMITS)
         with second:  # a fresh host that knows nothing of job 1, bypassing its own ledger's view of the machine
-            second.connect(timeout_s=2.0)
+            second.rearm(timeout_s=1.0)
             second.self_check(timeout_s=1.0)
             second.heartbeat(timeout_s=1.0)
             second._jobs = type(second._jobs)()  # noqa: SLF001 (simulate a host that forgot)

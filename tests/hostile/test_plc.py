@@ -1,0 +1,142 @@
+"""Hostile peers of the simulated polishing PLC (Modbus/TCP on loopback): one owner per connection.
+
+A second Modbus client, as any program on the network can be, against the station's link: it may
+read, and re-arm a tripped watchdog (the operator's register), nothing else. Raw pymodbus clients
+stand for the stranger; every wait is bounded.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pymodbus.client import ModbusTcpClient
+from pymodbus.pdu import ExceptionResponse
+
+from wavestack.drivers.plc import (JobFile, JobLimits, LinkTiming, PolishingLink, RegisterMap,
+                                   WriteRefused, write_job_file)
+from wavestack.simulators.plc import (MachineSimSettings, PlcSimLayout, PlcSimulator, PolishingMachine,
+                                      PolishingStation, WatchdogState)
+
+TIMING = LinkTiming(io_timeout_s=0.5, reconnect_initial_s=0.02, reconnect_max_s=0.2, command_retries=2,
+                    heartbeat_echo_max_lag=2)
+LIMITS = JobLimits(10_000, 10_000.0, 20.0, 100.0, (-5.0, 5.0), (-5.0, 5.0))
+WAIT_S = 10.0  # bounds a wait for a state; never a timing assertion
+MAP = dict(unit_id=1, self_check_register=0, self_check_value=12345.678, heartbeat_register=10, rearm_register=11,
+           owner_register=12, status_register=20, command_block=(100, 10), output_block=(200, 10), job_register=300,
+           machine_register=320)
+
+
+def layout(watchdog_timeout_s: float) -> PlcSimLayout:
+    values = {k: v for k, v in MAP.items()}
+    return PlcSimLayout(**values, self_check_word_order="CDAB", command_word_order="CDAB",  # type: ignore[arg-type]
+                        output_word_order="CDAB", watchdog_timeout_s=watchdog_timeout_s)
+
+
+def register_map() -> RegisterMap:
+    return RegisterMap.build(word_order="CDAB", **MAP)  # type: ignore[arg-type]
+
+
+@contextmanager
+def station(folder: Path, watchdog_timeout_s: float = 1.0) -> Iterator[tuple[PlcSimulator, PolishingLink]]:
+    machine = PolishingMachine(MachineSimSettings(folder, time_scale=1.0, travel_x_mm=(-4.0, 4.0),
+                                                  travel_y_mm=(-4.0, 4.0), max_dwell_per_point_s=10.0))
+    with PlcSimulator(layout(watchdog_timeout_s), PolishingStation((0.0,) * 4), machine=machine) as sim:
+        with PolishingLink("127.0.0.1", sim.port, register_map(), TIMING, job_limits=LIMITS) as link:
+            link.connect(timeout_s=2.0)
+            link.self_check(timeout_s=1.0)
+            link.heartbeat(timeout_s=1.0)
+            yield sim, link
+
+
+@contextmanager
+def stranger(sim: PlcSimulator) -> Iterator[ModbusTcpClient]:
+    client = ModbusTcpClient("127.0.0.1", port=sim.port, timeout=1.0, retries=0)
+    assert client.connect()
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+def refused_code(reply: object) -> int | None:
+    return int(reply.exception_code) if isinstance(reply, ExceptionResponse) else None
+
+
+def wait_for(condition: Callable[[], bool], beat: PolishingLink | None = None) -> bool:
+    deadline = time.monotonic() + WAIT_S
+    while time.monotonic() < deadline:
+        if beat is not None:
+            beat.heartbeat(timeout_s=1.0)
+        if condition():
+            return True
+        time.sleep(0.02)
+    return condition()
+
+
+def test_a_second_client_reads_but_cannot_beat_command_or_drive_jobs(tmp_path: Path) -> None:
+    with station(tmp_path, watchdog_timeout_s=60.0) as (sim, link):
+        with stranger(sim) as other:
+            assert not other.read_holding_registers(20, count=3, device_id=1).isError()  # reading is open
+            beat = sim.heartbeat_value
+            assert refused_code(other.write_register(10, beat + 7, device_id=1)) == 1  # the heartbeat
+            assert refused_code(other.write_registers(100, [99, 1] + [0] * 8, device_id=1)) == 1  # a command
+            assert refused_code(other.write_registers(300, [1, 65535, 0, 0, 1, 0, 0, 0], device_id=1)) == 1  # a load
+            assert refused_code(other.write_registers(300, [3, 1, 0, 0, 0, 0, 0, 0], device_id=1)) == 1  # an abort
+            assert refused_code(other.write_registers(12, [1, 2, 3, 4], device_id=1)) == 1  # another token
+            assert refused_code(other.write_register(11, 0, device_id=1)) is None  # the operator's register
+        assert sim.heartbeat_value == beat and sim.accepted_commands == [] and sim.last_accepted_id == 0
+        assert link.heartbeat(timeout_s=1.0).ready  # the station's link goes on
+
+
+def test_a_dead_station_trips_its_watchdog_whoever_beats_and_its_job_stops(tmp_path: Path) -> None:
+    with station(tmp_path, watchdog_timeout_s=1.0) as (sim, link):
+        n = 400
+        job = JobFile(1, np.linspace(-2, 2, n), np.zeros(n), np.full(n, 0.5), np.full(n, 20.0), 0.1,
+                      {"kind": "gaussian"}, {"pixels": 1})
+        link.load_job(write_job_file(tmp_path, job), 1)
+        link.start_job(1)
+        link.close()  # the station dies; its connection goes with it
+        with stranger(sim) as other:
+            beats = 0
+            deadline = time.monotonic() + 3.0
+            while time.monotonic() < deadline and sim.watchdog_state is not WatchdogState.TRIPPED:
+                other.write_register(10, 1000 + beats, device_id=1)  # feeding the watchdog, as fast as it can
+                beats += 1
+                time.sleep(0.05)
+            assert sim.watchdog_state is WatchdogState.TRIPPED
+        assert sim.machine is not None and wait_for(lambda: sim.machine.snapshot().state.name == "ABORTED")
+        assert sim.machine.snapshot().reason.name == "WATCHDOG"
+
+
+def test_the_station_keeps_its_place_across_a_reconnect_and_a_plc_restart(tmp_path: Path) -> None:
+    with station(tmp_path, watchdog_timeout_s=1.0) as (sim, link):
+        link.close()
+        assert link.heartbeat(timeout_s=1.0).ready  # a new connection: the same token takes the place back
+        sim.restart(downtime_s=0.2)
+        assert wait_for(lambda: _beats(link))
+        assert sim.watchdog_trips == 0 and sim.program.owner_connection is not None
+
+
+def _beats(link: PolishingLink) -> bool:
+    try:
+        return link.heartbeat(timeout_s=0.3).ready
+    except Exception:  # noqa: BLE001 - refused or backing off while the server is down
+        return False
+
+
+def test_after_a_trip_the_operator_rearms_and_the_station_claims_again(tmp_path: Path) -> None:
+    with station(tmp_path, watchdog_timeout_s=0.5) as (sim, link):
+        assert wait_for(lambda: sim.watchdog_state is WatchdogState.TRIPPED)
+        assert sim.program.owner_connection is None  # the trip ended the ownership
+        monitor = PolishingLink("127.0.0.1", sim.port, register_map(), TIMING, monitor=True)
+        with monitor:
+            with pytest.raises(WriteRefused, match="re-arm register only"):
+                monitor.write_registers(10, [5], timeout_s=1.0)  # before the wire: the heartbeat is the station's
+            monitor.rearm(timeout_s=1.0)
+        assert link.heartbeat(timeout_s=1.0).ready  # refused once (nobody owns it), claimed, beaten
+        assert sim.watchdog_state is WatchdogState.RUNNING
