@@ -4,7 +4,7 @@ A polishing program goes to the machine as a job file (:mod:`.job_file`); over M
 announces it in the job block (action LOAD: job id, CRC-32, point count, total dwell) and starts it
 (action START); the machine reports its state in the machine block:
 
-- ``state`` (:class:`MachineState`): IDLE, LOADED, RUNNING, DONE, ABORTED, FAULT;
+- ``state`` (:class:`MachineState`): IDLE, LOADED, RUNNING, DONE, ABORTED, FAULT, LOADING;
 - ``reason`` (:class:`JobReason`): why a load was refused (FAULT) or a run ended early (ABORTED);
 - ``job id``, ``points done`` and ``point count`` of the job the state belongs to.
 
@@ -39,7 +39,7 @@ class JobRefused(LimitError):
 class JobAction(enum.IntEnum):
     """The job block's first register: what the write asks of the machine."""
 
-    LOAD = 1  #: read the job file ``job-NNNNN.wsjob``, check it against the announced values and the limits
+    LOAD = 1  #: read the job file ``job-NNNNN.wsjob`` (LOADING), check it against the announced values and limits
     START = 2  #: run the loaded job (its id must be the one loaded)
     ABORT = 3  #: stop the running job (ends ABORTED, reason HOST_ABORT, removal so far kept)
 
@@ -53,6 +53,7 @@ class MachineState(enum.IntEnum):
     DONE = 3  #: every point was polished
     ABORTED = 4  #: the run stopped early (reason says why); the part polished so far stays polished
     FAULT = 5  #: the last LOAD was refused (reason says why); the next LOAD may clear it
+    LOADING = 6  #: the machine reads and checks the announced job file (seconds for a large job)
 
 
 class JobReason(enum.IntEnum):

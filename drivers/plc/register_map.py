@@ -305,7 +305,7 @@ class RegisterMap:
                 "machine", machine_register, MACHINE_BLOCK_COUNT,
                 "uint16 state, uint16 reason, uint16 job id, uint32 points done, uint32 point count",
                 read_function, None, word_order,
-                "state 0 idle, 1 loaded, 2 running, 3 done, 4 aborted, 5 fault; reason code (docs/instruments.md)"),
+                "state 0 idle, 1 loaded, 2 running, 3 done, 4 aborted, 5 fault, 6 loading; reason code (docs/instruments.md)"),
             owner=None if owner_register is None else RegisterBlock(
                 "owner", owner_register, OWNER_COUNT, "uint16[4] token", read_function, block_write_function, None,
                 "the host's ownership token; written whole; reads as zeros"),

@@ -5,7 +5,8 @@ which a simulator never imports): a UTF-8 JSON body, a newline, and a trailer li
 ``wsjob-crc32 XXXXXXXX N`` holding the CRC-32 (zlib's) of the body's ``N`` bytes. The reader
 checks, in this order, and refuses with the first reason that applies:
 
-1. the file exists and is not larger than the machine takes (FILE_MISSING, TOO_MANY_POINTS);
+1. the file exists, is a regular file (a FIFO or a device is never waited on or read), and is not
+   larger than the machine takes (FILE_MISSING, TOO_MANY_POINTS);
 2. the trailer is there and the body is as long as it says (FILE_TRUNCATED);
 3. the body's CRC-32 equals the trailer's (FILE_CORRUPT);
 4. the body is a JSON object of format ``wavestack-polishing-job`` version 1 (FILE_CORRUPT,
@@ -20,7 +21,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+import stat
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +47,9 @@ class JobFileRefused(Exception):
         super().__init__(f"{reason.name}: {message}")
         self.reason = reason
         self.message = message
+
+    def __reduce__(self) -> tuple[type[JobFileRefused], tuple[StopReason, str]]:
+        return JobFileRefused, (self.reason, self.message)  # it crosses from the machine's reading process
 
 
 @dataclass(frozen=True)
@@ -100,12 +106,16 @@ def read_job_file(path: Path, max_bytes: int) -> MachineJob:
 
 
 def _read_bytes(path: Path, max_bytes: int) -> bytes:
-    try:
-        size = path.stat().st_size
-        if size > max_bytes:
-            raise JobFileRefused(StopReason.TOO_MANY_POINTS, f"{path.name}: {size} bytes, the machine reads at "
-                                 f"most {max_bytes}")
-        with open(path, "rb") as stream:
+    try:  # O_NONBLOCK: opening a FIFO returns at once (no writer needed), and fstat says what it is
+        descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        with open(descriptor, "rb", closefd=True) as stream:
+            info = os.fstat(stream.fileno())
+            if not stat.S_ISREG(info.st_mode):
+                raise JobFileRefused(StopReason.FILE_MISSING, f"{path.name}: not a regular file (a FIFO, device "
+                                     "or folder is never read as a job)")
+            if info.st_size > max_bytes:
+                raise JobFileRefused(StopReason.TOO_MANY_POINTS, f"{path.name}: {info.st_size} bytes, the machine "
+                                     f"reads at most {max_bytes}")
             return stream.read(max_bytes + 1)
     except FileNotFoundError:
         raise JobFileRefused(StopReason.FILE_MISSING, f"no file {path.name} in {path.parent}") from None

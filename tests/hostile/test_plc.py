@@ -7,6 +7,8 @@ stand for the stranger; every wait is bounded.
 
 from __future__ import annotations
 
+import os
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -17,14 +19,14 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 from pymodbus.pdu import ExceptionResponse
 
-from wavestack.drivers.plc import (JobFile, JobLimits, LinkTiming, PolishingLink, RegisterMap,
-                                   WriteRefused, write_job_file)
+from wavestack.drivers.plc import (JobFile, JobLimits, JobReason, JobRejected, LinkTiming, PolishingLink,
+                                   RegisterMap, WriteRefused, write_job_file)
 from wavestack.simulators.plc import (MachineSimSettings, PlcSimLayout, PlcSimulator, PolishingMachine,
                                       PolishingStation, WatchdogState)
 
 TIMING = LinkTiming(io_timeout_s=0.5, reconnect_initial_s=0.02, reconnect_max_s=0.2, command_retries=2,
                     heartbeat_echo_max_lag=2)
-LIMITS = JobLimits(10_000, 10_000.0, 20.0, 100.0, (-5.0, 5.0), (-5.0, 5.0))
+LIMITS = JobLimits(500_000, 10_000.0, 20.0, 100.0, (-5.0, 5.0), (-5.0, 5.0))
 WAIT_S = 10.0  # bounds a wait for a state; never a timing assertion
 MAP = dict(unit_id=1, self_check_register=0, self_check_value=12345.678, heartbeat_register=10, rearm_register=11,
            owner_register=12, status_register=20, command_block=(100, 10), output_block=(200, 10), job_register=300,
@@ -140,3 +142,87 @@ def test_after_a_trip_the_operator_rearms_and_the_station_claims_again(tmp_path:
             monitor.rearm(timeout_s=1.0)
         assert link.heartbeat(timeout_s=1.0).ready  # refused once (nobody owns it), claimed, beaten
         assert sim.watchdog_state is WatchdogState.RUNNING
+
+
+class RoundTrips:
+    """A second client timing status reads on loopback while something else happens; the slowest, s."""
+
+    def __init__(self, sim: PlcSimulator) -> None:
+        self._sim, self._stop, self.slowest, self.reads = sim, threading.Event(), 0.0, 0
+        self._thread = threading.Thread(target=self._run)
+
+    def __enter__(self) -> RoundTrips:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(WAIT_S)
+
+    def _run(self) -> None:
+        with stranger(self._sim) as client:
+            client.comm_params.timeout_connect = 10.0  # a frozen PLC shows as a slow read, not a lost one
+            while not self._stop.is_set():
+                start = time.monotonic()
+                client.read_holding_registers(20, count=3, device_id=1)
+                self.slowest = max(self.slowest, time.monotonic() - start)
+                self.reads += 1
+                time.sleep(0.01)
+
+
+def test_a_large_job_loads_in_the_background_and_the_plc_keeps_answering(tmp_path: Path) -> None:
+    # issue 29, finding 3: the file was read and parsed in the Modbus event loop (a 500,000-point job
+    # froze the PLC for 2.2-3.4 s and tripped the watchdog of the station that sent it)
+    n = 300_000
+    side = np.linspace(-3.0, 3.0, n)
+    job = JobFile(1, side, np.zeros(n), np.full(n, 0.01), np.full(n, 50.0), 0.1, {"kind": "gaussian"},
+                  {"pixels": 1})
+    receipt = write_job_file(tmp_path, job)
+    with station(tmp_path, watchdog_timeout_s=1.0) as (sim, link):
+        with RoundTrips(sim) as trips:
+            stop = threading.Event()
+            beater = threading.Thread(target=_beat_until, args=(link, stop))
+            beater.start()
+            try:
+                status = link.load_job(receipt, 1, timeout_s=2.0)
+            finally:
+                stop.set()
+                beater.join(WAIT_S)
+        assert status.state.name == "LOADED" and status.point_count == n
+        assert sim.watchdog_trips == 0
+        # a read that waited on the whole load would take the seconds the check takes; 0.5 s is
+        # far above a loopback round trip on a loaded machine and far below a 300,000-point check
+        assert trips.reads > 10 and trips.slowest < 0.5
+
+
+def _beat_until(link: PolishingLink, stop: threading.Event) -> None:
+    while not stop.wait(0.1):
+        link.heartbeat(timeout_s=1.0)
+
+
+def test_a_fifo_named_as_a_job_is_refused_without_waiting_on_it(tmp_path: Path) -> None:
+    job = JobFile(1, np.zeros(2), np.zeros(2), np.ones(2), np.full(2, 10.0), 0.1, {"kind": "gaussian"}, {})
+    (tmp_path / "elsewhere").mkdir()
+    receipt = write_job_file(tmp_path / "elsewhere", job)  # its receipt; the job folder holds a FIFO by that name
+    os.mkfifo(tmp_path / receipt.path.name)
+    unblock = threading.Timer(5.0, _open_for_writing, args=(tmp_path / receipt.path.name,))
+    unblock.start()  # the old reader waited on the FIFO until a writer came: it comes after 5 s
+    try:
+        with station(tmp_path, watchdog_timeout_s=60.0) as (sim, link):
+            with RoundTrips(sim) as trips:
+                with pytest.raises(JobRejected) as refused:
+                    link.load_job(receipt, 1, timeout_s=2.0)
+            assert refused.value.status.reason is JobReason.FILE_MISSING
+            assert "not a regular file" in sim.machine.last_refusal
+            assert trips.slowest < 0.5
+    finally:
+        unblock.cancel()
+        unblock.join()
+
+
+def _open_for_writing(path: Path) -> None:
+    try:
+        descriptor = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+    except OSError:  # nobody reads it (the new reader never opened it for long): nothing to unblock
+        return
+    os.close(descriptor)

@@ -26,7 +26,7 @@ from wavestack.config.schema import ConfigError, device_tables, load_toml, parse
 from wavestack.drivers.plc.jobs import JobLimits
 from wavestack.drivers.plc.register_map import RegisterMap
 from wavestack.drivers.plc.transport import LinkTiming
-from wavestack.simulators.plc.machine import MachineSimSettings, PolishingMachine, RemovalTarget
+from wavestack.simulators.plc import MachineSimSettings, PolishingMachine, RemovalTarget
 from wavestack.simulators.plc.polishing import PolishingStation
 from wavestack.simulators.plc import PlcSimLayout
 

@@ -58,7 +58,7 @@ def test_the_reason_codes_agree_with_the_simulators_table() -> None:
     assert all(r.meaning for r in JobReason)
 
 
-@pytest.mark.parametrize("registers", [[6, 0, 1, 0, 0, 0, 0], [0, 99, 1, 0, 0, 0, 0], [0, 0, 0]])
+@pytest.mark.parametrize("registers", [[7, 0, 1, 0, 0, 0, 0], [0, 99, 1, 0, 0, 0, 0], [0, 0, 0]])
 def test_unknown_codes_and_wrong_lengths_are_refused(registers: list[int]) -> None:
     with pytest.raises(ValueError, match="unknown|registers"):
         decode_machine(registers, "ABCD")

@@ -255,6 +255,7 @@ def test_a_refused_load_of_an_id_this_host_never_announced_spends_nothing(tmp_pa
     with station(tmp_path) as (sim, link, _):
         assert sim.machine is not None
         sim.machine.load(65535, 0, 1, 1.0)
+        assert sim.machine.wait_idle(WAIT_S)
         status = link.read_machine()
         assert (status.state, status.job_id, status.reason) == (MachineState.FAULT, 65535, JobReason.FILE_MISSING)
         job_id = link.next_job_id()
