@@ -61,6 +61,9 @@ logger = logging.getLogger(__name__)
 HEXAPOD_AXES = ("X", "Y", "Z", "U", "V", "W")
 #: PI's TCP port for GCS on its controllers (a ``tcp://HOST`` URL without a port).
 DEFAULT_PORT = 50000
+#: Largest |pivot coordinate| the driver sends, mm: beyond a hexapod's reach by far, and no NaN or
+#: infinity (which the ``SPI`` text would carry as ``nan``/``inf``).
+MAX_PIVOT_MM = 10_000.0
 _ERR = b"ERR?\n"
 _POLL_S = 0.02  # wait_on_target: pause between ONT? polls
 
@@ -328,9 +331,17 @@ class PIHexapod(LinkedDevice):
         self._command(gcs.encode_axis_values("SVO", {axis: bool(on) for axis in self.configured_axes}), "SVO")
 
     def set_pivot(self, pivot: Sequence[float]) -> None:
-        """Set the pivot point (``SPI R x S y T z``), mm; the controller refuses unless U = V = W = 0 (error 9)."""
-        if len(pivot) != 3:
-            raise ValueError(f"{self.name}: pivot must be (x, y, z) in mm, got {pivot!r}")
+        """Set the pivot point (``SPI R x S y T z``), mm; the controller refuses unless U = V = W = 0 (error 9)
+        and within its range (error 17).
+
+        Raises
+        ------
+        ValueError
+            Not three finite numbers within +-``MAX_PIVOT_MM`` (nothing sent).
+        """
+        if len(pivot) != 3 or not all(is_number(v) and abs(v) <= MAX_PIVOT_MM for v in pivot):
+            raise ValueError(f"{self.name}: pivot must be (x, y, z) in mm, each finite and within +-{MAX_PIVOT_MM:g} "
+                             f"mm, got {pivot!r}; nothing sent")
         self._command(gcs.encode_axis_values("SPI", dict(zip("RST", (float(v) for v in pivot)))), "SPI")
 
     def set_velocity(self, velocity: float) -> None:

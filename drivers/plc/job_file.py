@@ -22,13 +22,16 @@ id) in the configured job folder is UTF-8 text in two parts:
    reads the file the host meant.
 
 Atomic: the body and trailer go to a temporary file in the same folder, are flushed and fsynced,
-then ``os.replace`` gives the file its name (and the folder is fsynced), so the machine never sees a
-half-written job under a job's name. An existing job file is never overwritten (ids are never
-reused).
+then a hard link gives the file its name in one step that fails when the name exists (and the
+folder is fsynced), so the machine never sees a half-written job under a job's name and a job file
+is never overwritten, not even one another writer puts there at the same moment (ids are never
+reused). On a file system without hard links the name is first claimed with an exclusive create
+(an empty file, which the machine would refuse as truncated) and then replaced by the job.
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import math
@@ -248,8 +251,6 @@ def write_job_file(folder: Path, job: JobFile) -> JobReceipt:
     if not folder.is_dir():
         raise OSError(f"job folder {folder} does not exist or is not a folder")
     path = folder / job_file_name(job.job_id)
-    if path.exists():
-        raise JobRefused(str(folder), f"refusing to overwrite {path.name}: job id {job.job_id} was used before")
     data, crc = encode_job_file(job)
     handle, temporary = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
     try:
@@ -257,15 +258,32 @@ def write_job_file(folder: Path, job: JobFile) -> JobReceipt:
             stream.write(data)
             stream.flush()
             os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except BaseException:
+        _name_without_overwrite(Path(temporary), path, job.job_id)
+    finally:
         Path(temporary).unlink(missing_ok=True)
-        raise
     _fsync_folder(folder)
     _log.info("job %d written to %s (%d points, %.3f s dwell, CRC-32 %08x)", job.job_id, path, job.point_count,
               job.total_dwell_s, crc)
     return JobReceipt(path=path, crc32=crc, point_count=job.point_count, total_dwell_s=job.total_dwell_s,
                       summary=job.summary())
+
+
+def _name_without_overwrite(temporary: Path, path: Path, job_id: int) -> None:
+    """Give the written file its job name in one step that never replaces an existing name (module notes)."""
+    refused = JobRefused(str(path.parent), f"refusing to overwrite {path.name}: job id {job_id} was used before")
+    try:
+        os.link(temporary, path)  # fails with EEXIST whatever is there: a file, a link, a dangling symlink
+        return
+    except FileExistsError:
+        raise refused from None
+    except OSError as error:
+        if error.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS):
+            raise
+    try:  # no hard links here: claim the name exclusively, then replace the empty claim with the job
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+    except FileExistsError:
+        raise refused from None
+    os.replace(temporary, path)
 
 
 def _fsync_folder(folder: Path) -> None:

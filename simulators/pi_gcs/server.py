@@ -5,7 +5,10 @@ socket pair: it reads whatever bytes arrive (several commands in one packet, one
 several packets: :class:`~wavestack.simulators.pi_gcs.framing.LineAssembler` does not care), feeds
 them to the :class:`~wavestack.simulators.pi_gcs.controller.GcsController` and writes the answers,
 honouring split replies (pieces released at their times) and dropped connections. All clients share
-the one controller (one error state, one platform), as on the real device.
+the one controller (one error state, one platform), as on the real device. Sockets never block the
+loop: a reply goes out as far as the peer's buffer takes it and the rest waits for the socket to be
+writable, so a client that never reads stalls no one; one whose unsent replies pass
+``MAX_PENDING_BYTES`` is disconnected.
 
 :meth:`HexapodSimulator.stop` wakes the loop, which closes every socket before the thread ends; the
 caller joins the thread, so nothing outlives the ``with`` block.
@@ -29,14 +32,16 @@ from wavestack.simulators.pi_gcs.framing import LineAssembler
 from wavestack.simulators.pi_gcs.pose import SimPose
 from wavestack.simulators.pi_gcs.settings import HexapodSimSettings
 
-__all__ = ["DEFAULT_GCS_PORT", "HexapodSimulator"]
+__all__ = ["DEFAULT_GCS_PORT", "MAX_PENDING_BYTES", "HexapodSimulator"]
 
 _log = logging.getLogger(__name__)
 
 #: PI's TCP port for GCS on its controllers.
 DEFAULT_GCS_PORT = 50000
 _IDLE_S = 0.1  # longest sleep of the loop when nothing is due
-_SEND_TIMEOUT_S = 2.0  # a host that stops reading cannot hang the loop for longer
+#: Unsent reply bytes a client may leave waiting before it is disconnected (a GCS reply is a few
+#: hundred bytes: a client this far behind does not read).
+MAX_PENDING_BYTES = 1 << 16
 
 
 @dataclass
@@ -46,6 +51,8 @@ class _Client:
     outbox: deque[tuple[float, bytes]] = field(default_factory=deque)  # (monotonic due time, chunk)
     close_when_sent: bool = False
     last_due: float = 0.0
+    blocked: bool = False  # the socket's buffer is full: wait until it is writable
+    pending: int = 0  # bytes in the outbox
 
 
 class HexapodSimulator:
@@ -173,13 +180,16 @@ class HexapodSimulator:
         selector.register(wake, selectors.EVENT_READ, "wake")
         try:
             while not self._stopping.is_set():
-                for key, _ in selector.select(self._timeout()):
+                for key, events in selector.select(self._timeout()):
                     if key.data == "accept":
                         self._accept(selector, listener)
                     elif key.data == "wake":
                         wake.recv(4096)
                     else:
-                        self._read(selector, key.data)
+                        if events & selectors.EVENT_WRITE:
+                            key.data.blocked = False
+                        if events & selectors.EVENT_READ:
+                            self._read(selector, key.data)
                 if self._drop_all.is_set():
                     self._drop_all.clear()
                     for client in self._snapshot():
@@ -200,7 +210,7 @@ class HexapodSimulator:
 
     def _timeout(self) -> float:
         now = time.monotonic()
-        due = [c.outbox[0][0] for c in self._snapshot() if c.outbox]
+        due = [c.outbox[0][0] for c in self._snapshot() if c.outbox and not c.blocked]
         return max(0.0, min([_IDLE_S, *(d - now for d in due)]))
 
     def _accept(self, selector: selectors.BaseSelector, listener: socket.socket) -> None:
@@ -208,7 +218,7 @@ class HexapodSimulator:
             sock, _ = listener.accept()
         except (BlockingIOError, InterruptedError):
             return
-        sock.settimeout(_SEND_TIMEOUT_S)
+        sock.setblocking(False)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         client = _Client(sock)
         with self._clients_lock:
@@ -219,6 +229,8 @@ class HexapodSimulator:
     def _read(self, selector: selectors.BaseSelector, client: _Client) -> None:
         try:
             data = client.sock.recv(4096)
+        except (BlockingIOError, InterruptedError):
+            return
         except OSError:
             data = b""
         if not data:
@@ -231,7 +243,12 @@ class HexapodSimulator:
             for delay_s, chunk in delivery.pieces:
                 due += delay_s
                 client.outbox.append((due, chunk))
+                client.pending += len(chunk)
             client.last_due = due
+            if client.pending > MAX_PENDING_BYTES:
+                _log.warning("GCS simulator: a client left %d reply bytes unread; disconnected", client.pending)
+                self._close(selector, client)
+                return
             if delivery.close:
                 client.close_when_sent = True
                 break  # the connection is gone: nothing after this command is read
@@ -240,11 +257,23 @@ class HexapodSimulator:
         now = time.monotonic()
         for client in self._snapshot():
             try:
-                while client.outbox and client.outbox[0][0] <= now:
-                    client.sock.sendall(client.outbox.popleft()[1])
+                while not client.blocked and client.outbox and client.outbox[0][0] <= now:
+                    due, chunk = client.outbox[0]
+                    sent = client.sock.send(chunk)
+                    client.pending -= sent
+                    if sent < len(chunk):  # the peer's buffer is full: the rest when it is writable
+                        client.outbox[0] = (due, chunk[sent:])
+                        client.blocked = True
+                    else:
+                        client.outbox.popleft()
+            except BlockingIOError:
+                client.blocked = True
             except OSError:
                 self._close(selector, client)
                 continue
+            events = selectors.EVENT_READ | (selectors.EVENT_WRITE if client.blocked else 0)
+            if selector.get_key(client.sock).events != events:
+                selector.modify(client.sock, events, client)
             if client.close_when_sent and not client.outbox:
                 self._close(selector, client)
 
