@@ -17,9 +17,14 @@ id) in the configured job folder is UTF-8 text in two parts:
    written with Python's shortest round-trip repr, so the reader gets the writer's float64 exactly;
 2. the **trailer**, one line after the body and a newline: ``wsjob-crc32 XXXXXXXX N`` with the
    CRC-32 (ISO-HDLC, as zlib and PKZIP compute it; 8 lowercase hex digits) of the body's ``N``
-   bytes. A reader that finds no trailer knows the file is truncated; one whose body does not match
-   knows it is corrupt. The same CRC-32 is announced over Modbus, so the machine also knows it
-   reads the file the host meant.
+   bytes, and with a job key ``wsjob-crc32 XXXXXXXX N hmac-sha256 H`` where ``H`` is the
+   HMAC-SHA256 (RFC 2104) of the body under the key, 64 lowercase hex digits. A reader that finds
+   no trailer knows the file is truncated; one whose body does not match knows it is corrupt. The
+   same CRC-32 is announced over Modbus, so the machine also knows it reads the file the host
+   meant. The CRC-32 catches accidents, not tampering: anyone who can write the job folder can
+   write a file with a matching CRC. A machine that holds the same key refuses a file without the
+   right HMAC (NOT_SIGNED): only a holder of the key can make a job it runs
+   (:func:`read_job_key` reads one from a file).
 
 Atomic: the body and trailer go to a temporary file in the same folder, are flushed and fsynced,
 then a hard link gives the file its name in one step that fails when the name exists (and the
@@ -32,6 +37,8 @@ reused). On a file system without hard links the name is first claimed with an e
 from __future__ import annotations
 
 import errno
+import hashlib
+import hmac
 import json
 import logging
 import math
@@ -51,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 from wavestack.drivers.plc.jobs import MAX_JOB_ID, JobRefused, JobSummary
 
 __all__ = ["JOB_FORMAT", "JOB_FORMAT_VERSION", "JobFile", "JobReceipt", "encode_job_file", "job_file_name",
-           "used_job_ids", "write_job_file"]
+           "read_job_key", "used_job_ids", "write_job_file"]
 
 _log = logging.getLogger(__name__)
 
@@ -197,8 +204,29 @@ class JobReceipt:
     summary: JobSummary
 
 
-def encode_job_file(job: JobFile) -> tuple[bytes, int]:
-    """The file's bytes (body, newline, trailer) and the body's CRC-32 (pure)."""
+def read_job_key(path: str | Path) -> bytes:
+    """The job key in a key file: hexadecimal text of at least 16 bytes (32 hex digits), whitespace around.
+
+    Make one with ``python3 -c "import secrets; print(secrets.token_hex(32))" > job.key``; the
+    machine's controller holds the same key.
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read, or does not hold such a key; the message names it.
+    """
+    try:
+        text = Path(path).read_text(encoding="ascii").strip()
+        key = bytes.fromhex(text)
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise ValueError(f"job key file {path}: expected hexadecimal text of at least 32 digits ({error})") from None
+    if len(key) < 16:
+        raise ValueError(f"job key file {path}: a key of {len(key)} bytes; expected at least 16 (32 hex digits)")
+    return key
+
+
+def encode_job_file(job: JobFile, key: bytes | None = None) -> tuple[bytes, int]:
+    """The file's bytes (body, newline, trailer; the HMAC too with a ``key``) and the body's CRC-32 (pure)."""
     header = {
         "format": JOB_FORMAT, "version": JOB_FORMAT_VERSION, "job_id": int(job.job_id), "created_utc": job.created_utc,
         "units": {"position": "mm", "dwell": "s", "feed": "mm/s"},
@@ -212,10 +240,11 @@ def encode_job_file(job: JobFile) -> tuple[bytes, int]:
     points = ",\n".join("  " + json.dumps(row, allow_nan=False) for row in rows)
     body = ("{\n" + "\n".join(lines) + '\n "points": [\n' + points + "\n ]\n}").encode("utf-8")
     crc = zlib.crc32(body) & 0xFFFFFFFF
-    return body + f"\n{_TRAILER} {crc:08x} {len(body)}\n".encode("ascii"), crc
+    signature = "" if key is None else f" hmac-sha256 {hmac.new(key, body, hashlib.sha256).hexdigest()}"
+    return body + f"\n{_TRAILER} {crc:08x} {len(body)}{signature}\n".encode("ascii"), crc
 
 
-def write_job_file(folder: Path, job: JobFile) -> JobReceipt:
+def write_job_file(folder: Path, job: JobFile, *, key: bytes | None = None) -> JobReceipt:
     """Write ``job`` into ``folder`` atomically; the receipt to announce.
 
     Parameters
@@ -224,6 +253,8 @@ def write_job_file(folder: Path, job: JobFile) -> JobReceipt:
         The job folder (must exist: a network share on a real station, a local folder in simulation).
     job
         The job.
+    key
+        The job key (:func:`read_job_key`): the trailer then carries the body's HMAC-SHA256.
 
     Returns
     -------
@@ -251,7 +282,7 @@ def write_job_file(folder: Path, job: JobFile) -> JobReceipt:
     if not folder.is_dir():
         raise OSError(f"job folder {folder} does not exist or is not a folder")
     path = folder / job_file_name(job.job_id)
-    data, crc = encode_job_file(job)
+    data, crc = encode_job_file(job, key)
     handle, temporary = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(handle, "wb") as stream:

@@ -79,6 +79,7 @@ class JobReason(enum.IntEnum):
     PLC_RESTART = 17  #: the PLC restarted during the run
     HOST_ABORT = 18  #: the host asked for an abort
     MACHINE_FAULT = 19  #: the machine itself failed during the run (its log says how)
+    NOT_SIGNED = 20  #: the machine has a job key and the file's HMAC is missing or wrong
 
     @property
     def meaning(self) -> str:
@@ -107,6 +108,7 @@ _MEANINGS = {
     JobReason.PLC_RESTART: "PLC restart during the run",
     JobReason.HOST_ABORT: "aborted by the host",
     JobReason.MACHINE_FAULT: "the machine failed during the run (see its log)",
+    JobReason.NOT_SIGNED: "the job file carries no valid HMAC for the machine's job key",
 }
 
 

@@ -36,7 +36,7 @@ IN_THREAD_BYTES = 1 << 20
 CHILD_TIMEOUT_S = 120.0
 
 
-def read_announced_job(path: Path, max_bytes: int) -> MachineJob:
+def read_announced_job(path: Path, max_bytes: int, key: bytes | None = None) -> MachineJob:
     """Read ``path`` with the machine's reader, in a child process when it is large (module notes).
 
     Raises
@@ -53,9 +53,9 @@ def read_announced_job(path: Path, max_bytes: int) -> MachineJob:
     except ValueError:
         context = None
     if size <= IN_THREAD_BYTES or context is None:
-        return read_job_file(path, max_bytes)
+        return read_job_file(path, max_bytes, key)
     receiver, sender = context.Pipe(duplex=False)
-    child = context.Process(target=_parse_in_child, args=(path, max_bytes, sender), daemon=True)
+    child = context.Process(target=_parse_in_child, args=(path, max_bytes, key, sender), daemon=True)
     child.start()
     sender.close()
     try:
@@ -76,9 +76,10 @@ def read_announced_job(path: Path, max_bytes: int) -> MachineJob:
     return outcome
 
 
-def _parse_in_child(path: Path, max_bytes: int, sender: multiprocessing.connection.Connection) -> None:
+def _parse_in_child(path: Path, max_bytes: int, key: bytes | None,
+                    sender: multiprocessing.connection.Connection) -> None:
     try:
-        outcome: MachineJob | JobFileRefused = read_job_file(path, max_bytes)
+        outcome: MachineJob | JobFileRefused = read_job_file(path, max_bytes, key)
     except JobFileRefused as refusal:
         outcome = refusal
     try:

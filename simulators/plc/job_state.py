@@ -62,6 +62,7 @@ class StopReason(enum.IntEnum):
     PLC_RESTART = 17
     HOST_ABORT = 18
     MACHINE_FAULT = 19
+    NOT_SIGNED = 20
 
 
 class JobEvent(enum.Enum):

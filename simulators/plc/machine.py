@@ -91,6 +91,8 @@ class MachineSimSettings:
         The machine's own limits.
     flush_s
         Real time between two chunks applied to the target (> 0).
+    job_key
+        The machine's job key: it reads only job files whose HMAC-SHA256 matches (None: any).
     """
 
     job_folder: Path
@@ -109,6 +111,7 @@ class MachineSimSettings:
     travel_x_mm: tuple[float, float] = (-100.0, 100.0)
     travel_y_mm: tuple[float, float] = (-100.0, 100.0)
     flush_s: float = 0.05
+    job_key: bytes | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "job_folder", Path(self.job_folder))
@@ -255,7 +258,7 @@ class PolishingMachine:
         job_id = announced[0]
         try:
             job = read_announced_job(self.settings.job_folder / f"job-{job_id:05d}.wsjob",
-                                     self.settings.max_file_bytes)
+                                     self.settings.max_file_bytes, self.settings.job_key)
             check_job(job, announced, self.settings)
             outcome: MachineJob | JobFileRefused = job
         except JobFileRefused as refusal:
