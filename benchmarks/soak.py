@@ -282,6 +282,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--on-failure", choices=("restart", "continue", "stop"), default="restart",
                    help="after a crash or a stuck station: build a fresh one (default), or not (a stuck one "
                         "is only reported with 'continue'; a crash ends the run), or stop")
+    p.add_argument("--slope-last-s", type=float, default=0.0,
+                   help="also judge the slope of the peak RSS over the last S seconds (a shift: 1800 of a 3600 s "
+                        "run), target --max-slope-mb-min; 0: not judged")
+    p.add_argument("--max-slope-mb-min", type=float, default=0.1, help="the tail slope's target, MB/min")
     p.add_argument("--tracemalloc", action="store_true", help="print the allocation sites that grew")
     p.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
     p.add_argument("--list-faults", action="store_true", help="print the fault kinds and exit")
@@ -399,8 +403,17 @@ def _report(args: argparse.Namespace, config: StationConfig, schedule: list[Sche
     rss = rss_verdict(monitor.samples, args.warmup_s, measure="peak")
     instant = rss_verdict(monitor.samples, args.warmup_s, measure="rss")
     report = verdict_json(run, monitor.samples, rss, observer.windows, failures.entries, sites, instant)
+    lines: list[str] = []
+    if args.slope_last_s > 0:  # a shift: the slope over the last stretch, once bounded histories are full
+        tail = rss_verdict(monitor.samples, max(args.warmup_s, observer.now() - args.slope_last_s), measure="peak")
+        report["rss_tail"] = {"last_s": args.slope_last_s, "slope_mb_per_min": tail.slope_mb_per_min,
+                              "samples": tail.samples, "mean_mb": tail.mean_mb, "target_mb_per_min": args.max_slope_mb_min}
+        report["targets"]["rss_tail_slope"] = bool(tail.slope_mb_per_min <= args.max_slope_mb_min)
+        report["passed"] = all(report["targets"].values())
+        lines.append(f"peak RSS slope over the last {args.slope_last_s:g} s: {tail.slope_mb_per_min:+.3f} MB/min "
+                     f"({tail.samples} samples, mean {tail.mean_mb:.1f} MB; target <= {args.max_slope_mb_min:g})")
     summary = runner.summaries[-1] if runner.summaries else None
-    lines = [f"station runs {run['station_runs']} (crashes {runner.crashes}, restarts {runner.restarts}); "
+    lines += [f"station runs {run['station_runs']} (crashes {runner.crashes}, restarts {runner.restarts}); "
              f"log: " + ", ".join(f"{k} {v}" for k, v in run["log_counts"].items())]
     if summary is not None:
         lines += [f"last station's summary: {summary.results} results ({summary.valid} valid) in "
