@@ -6,8 +6,10 @@
 
 The first call creates ``.venv`` beside this file and installs wavestack into it (editable, with
 its test extras). Later calls reuse it; it is reinstalled only when ``pyproject.toml`` changes.
-``test`` also needs a browser for the web view's test: Debian's Chromium (``/usr/bin/chromium``),
-installed with ``apt-get`` when missing (as root; Playwright's own browser download is not used).
+``test`` also needs a few Debian programs: a browser for the web view's test (Chromium,
+``/usr/bin/chromium``) and aravis (``arv-tool-0.8``, ``arv-fake-gv-camera-0.8``) for the GigE
+Vision tests, installed with ``apt-get`` when missing (as root; Playwright's own browser download
+is not used).
 """
 
 from __future__ import annotations
@@ -48,27 +50,37 @@ def ensure_environment() -> None:
     STAMP.write_text(_wanted_stamp())
 
 
-def ensure_chromium() -> None:
-    """Install Debian's ``chromium`` package when ``/usr/bin/chromium`` is missing (the browser test needs it).
+#: Debian packages the tests need: (what must exist, package, which test needs it)
+DEBIAN_TOOLS = ((CHROMIUM, "chromium", "the web view's browser test"),
+                (Path("/usr/bin/arv-tool-0.8"), "aravis-tools-cli", "the GigE Vision tests against aravis"),
+                (Path("/usr/bin/arv-fake-gv-camera-0.8"), "aravis-tools", "the GigE Vision tests against aravis"))
+
+
+def ensure_debian_tools() -> None:
+    """Install the Debian packages of :data:`DEBIAN_TOOLS` whose programs are missing (one apt-get run).
 
     Raises
     ------
     OSError
-        No apt-get, not root, or the package did not bring ``/usr/bin/chromium``; the message says what to do.
+        No apt-get, not root, or a package did not bring its program; the message says what to do.
     """
-    if CHROMIUM.exists():
+    missing = [(path, package, why) for path, package, why in DEBIAN_TOOLS if not path.exists()]
+    if not missing:
         return
+    packages = sorted({package for _, package, _ in missing})
     apt_get = shutil.which("apt-get")
     if apt_get is None or not hasattr(os, "geteuid") or os.geteuid() != 0:
-        raise OSError(f"{CHROMIUM} is missing and cannot be installed here (needs apt-get as root); the web view's "
-                      "browser test needs it: install Debian's chromium package (apt-get install chromium)")
+        needs = "; ".join(f"{why} needs {path}" for path, _, why in missing)
+        raise OSError(f"{needs}, and they cannot be installed here (needs apt-get as root): install Debian's "
+                      f"{' '.join(packages)} (apt-get install {' '.join(packages)})")
     environment = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    for command in ([apt_get, "update"], [apt_get, "install", "-y", "chromium"]):
-        print(f"ws.py: {CHROMIUM} is missing (the web view's browser test needs it): {' '.join(command)}",
+    for command in ([apt_get, "update"], [apt_get, "install", "-y", *packages]):
+        print(f"ws.py: {', '.join(str(path) for path, _, _ in missing)} missing: {' '.join(command)}",
               file=sys.stderr, flush=True)
         subprocess.run(command, check=True, env=environment)
-    if not CHROMIUM.exists():
-        raise OSError(f"apt-get installed chromium but {CHROMIUM} is still missing")
+    still = [str(path) for path, _, _ in missing if not path.exists()]
+    if still:
+        raise OSError(f"apt-get installed {' '.join(packages)} but {', '.join(still)} is still missing")
 
 
 def _parallel(pytest_args: list[str]) -> list[str]:
@@ -90,7 +102,7 @@ def main(argv: list[str]) -> int:
     try:
         ensure_environment()
         if argv[0] == "test":
-            ensure_chromium()
+            ensure_debian_tools()
     except (subprocess.CalledProcessError, OSError) as error:
         print(f"ws.py: set-up failed: {error}", file=sys.stderr)
         return 1

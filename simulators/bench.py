@@ -18,7 +18,20 @@ from numpy.typing import NDArray
 from wavestack.simulators.mdt693b import MDT693BDevice
 from wavestack.simulators.optic import OpticTruth, TestOptic
 from wavestack.simulators.spots import SpotRenderer
+from wavestack.simulators.gige import GigESimSettings, SimulatedGigECamera
 from wavestack.simulators.u3v import SimulatedU3VCamera, SimulatedUsbBackend, U3VSimSettings
+
+CameraSettings = U3VSimSettings | GigESimSettings
+
+
+def _camera(settings: CameraSettings, render: Any) -> tuple[SimulatedU3VCamera | SimulatedGigECamera,
+                                                             SimulatedUsbBackend | None]:
+    """The simulated camera the settings describe: USB3 Vision on a pyusb backend, or GigE Vision
+    (its sockets are bound; :meth:`SimulatedGigECamera.start` serves them)."""
+    if isinstance(settings, GigESimSettings):
+        return SimulatedGigECamera(settings, render), None
+    camera = SimulatedU3VCamera(settings, render)
+    return camera, SimulatedUsbBackend([camera])
 
 @dataclass(frozen=True)
 class PiezoCoupling:
@@ -82,20 +95,22 @@ class FrameTruth:
 
 
 class SimulatedInterferometer:
-    """A simulated camera (USB3 Vision over a pyusb backend) looking at a test optic through a piezo.
+    """A simulated camera (USB3 Vision over a pyusb backend, or GigE Vision on loopback) looking at a
+    test optic through a piezo.
 
     Parameters
     ----------
     optic : TestOptic
         The test optic; its bit depth should match the camera's pixel format.
-    camera_settings : U3VSimSettings
-        The camera; its width and height must match the optic's frame shape.
+    camera_settings : U3VSimSettings or GigESimSettings
+        The camera and its transport; its width and height must match the optic's frame shape.
+        ``backend`` is the pyusb backend of a USB3 Vision camera (None for GigE Vision).
     piezo : MDT693BDevice or None
         The simulated piezo controller (None: no phase shifting, e.g. a carrier station).
     coupling : PiezoCoupling
     """
 
-    def __init__(self, optic: TestOptic, camera_settings: U3VSimSettings, piezo: MDT693BDevice | None = None,
+    def __init__(self, optic: TestOptic, camera_settings: CameraSettings, piezo: MDT693BDevice | None = None,
                  coupling: PiezoCoupling = PiezoCoupling()) -> None:
         if optic.shape != (camera_settings.height, camera_settings.width):
             raise ValueError(f"optic frame shape {optic.shape} differs from the camera's "
@@ -103,8 +118,7 @@ class SimulatedInterferometer:
         self.optic = optic
         self.piezo = piezo
         self.coupling = coupling
-        self.camera = SimulatedU3VCamera(camera_settings, self._render)
-        self.backend = SimulatedUsbBackend([self.camera])
+        self.camera, self.backend = _camera(camera_settings, self._render)
 
     def _render(self, block_id: int, device_time_ns: int, exposure_us: float) -> tuple[NDArray[Any], FrameTruth]:
         volts = None if self.piezo is None else self.piezo.voltage(self.coupling.axis)
@@ -118,10 +132,9 @@ class SimulatedInterferometer:
 class SimulatedShackHartmann:
     """A simulated camera behind a lenslet array looking at the same kind of test optic."""
 
-    def __init__(self, spots: SpotRenderer, camera_settings: U3VSimSettings) -> None:
+    def __init__(self, spots: SpotRenderer, camera_settings: CameraSettings) -> None:
         self.spots = spots
-        self.camera = SimulatedU3VCamera(camera_settings, self._render)
-        self.backend = SimulatedUsbBackend([self.camera])
+        self.camera, self.backend = _camera(camera_settings, self._render)
 
     def _render(self, block_id: int, device_time_ns: int, exposure_us: float) -> tuple[NDArray[Any], Any]:
         pixels, truth = self.spots.spot_frame(device_time_ns * 1e-9)

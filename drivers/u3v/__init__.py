@@ -4,7 +4,6 @@ Sans-I/O modules, each pure and fuzzable:
 
 * :mod:`~wavestack.drivers.u3v.gencp` — READMEM/WRITEMEM commands, acknowledges, status codes.
 * :mod:`~wavestack.drivers.u3v.bootstrap` — ABRM, SBRM, SIRM, manifest, SIRM transfer sizes.
-* :mod:`~wavestack.drivers.u3v.genicam` — the GenICam XML subset wavestack needs.
 * :mod:`~wavestack.drivers.u3v.image_block` — leader, trailer, pixel formats, payload decoding.
 * :mod:`~wavestack.drivers.u3v.stream` — block assembly (re-exports the ``image_block`` names).
 
@@ -12,7 +11,7 @@ and the I/O around them:
 
 * :mod:`~wavestack.drivers.u3v.control` — the locked GenCP control channel over the USB endpoints.
 * :mod:`~wavestack.drivers.u3v.connection` — finding, claiming and releasing the camera.
-* :mod:`~wavestack.drivers.u3v.feature_io` — reading and writing GenICam feature registers.
+* :mod:`~wavestack.drivers.u3v.register_port` — the register port the GenICam node map reads through.
 * :mod:`~wavestack.drivers.u3v.acquisition` — enabling the stream, the reader thread, counters.
 * :mod:`~wavestack.drivers.u3v.driver` with :class:`U3VCamera`, which holds the state::
 
@@ -28,13 +27,12 @@ from wavestack.drivers.u3v.bootstrap import (Abrm, ManifestEntry, Sbrm, Sirm, Tr
                                              compute_transfer_sizes)
 from wavestack.drivers.u3v.driver import U3VCamera, U3VCounters
 from wavestack.drivers.u3v.gencp import Acknowledge, GenCPStatus, status_name
-from wavestack.drivers.u3v.genicam import Feature, FeatureMap, Register, parse_genicam
 from wavestack.drivers.u3v.stream import (AssembledBlock, BlockAssembler, DiscardedBlock, Leader, Trailer,
                                           decode_pixels, parse_leader, parse_trailer)
 
 __all__ = [
-    "Abrm", "Acknowledge", "AssembledBlock", "BlockAssembler", "DiscardedBlock", "Feature", "FeatureMap",
-    "GenCPStatus", "Leader", "ManifestEntry", "Register", "Sbrm", "Sirm", "Trailer", "TransferSizes", "U3VCamera",
-    "U3VCounters", "compute_transfer_sizes", "decode_pixels", "parse_genicam", "parse_leader", "parse_trailer",
+    "Abrm", "Acknowledge", "AssembledBlock", "BlockAssembler", "DiscardedBlock",
+    "GenCPStatus", "Leader", "ManifestEntry", "Sbrm", "Sirm", "Trailer", "TransferSizes", "U3VCamera",
+    "U3VCounters", "compute_transfer_sizes", "decode_pixels", "parse_leader", "parse_trailer",
     "status_name",
 ]

@@ -67,33 +67,6 @@ class U3VCounters:
     transfer_errors: int
 
 
-class RingHistory:
-    """The frame counters of the rings a camera replaced (on reopen, or after a reader gave up).
-
-    A camera's counters are the replaced rings' plus the current ring's, so they only grow over the
-    camera's life, across reconnects; a replaced ring's pending frames count as dropped.
-    """
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._totals = (0, 0, 0, 0)  # acquired, delivered, dropped, dropped_in_gaps
-
-    def replace(self, ring: FrameRing[Frame], name: str) -> FrameRing[Frame]:
-        """A fresh ring like ``ring`` (named ``name``); ``ring``'s counts carry on, its pending frames dropped."""
-        c = ring.counters()
-        with self._lock:
-            a, d, x, g = self._totals
-            self._totals = (a + c.acquired, d + c.delivered, x + c.dropped + c.pending, g + c.dropped_in_gaps)
-        return FrameRing(ring.capacity, ring.policy, name=name)
-
-    def with_current(self, ring: FrameRing[Frame], stats: dict[str, int]) -> U3VCounters:
-        """The camera's counters: the replaced rings' and ``ring``'s, with the stream-health ``stats``."""
-        c = ring.counters()
-        with self._lock:
-            a, d, x, g = self._totals
-        return U3VCounters(a + c.acquired, d + c.delivered, x + c.dropped, g + c.dropped_in_gaps, c.pending, **stats)
-
-
 def enable_stream(control: ControlChannel, sirm_address: int, deadline: float,
                   device: str) -> tuple[bs.Sirm, bs.TransferSizes]:
     """Configure the SIRM transfer sizes and enable the stream interface.

@@ -23,7 +23,9 @@ from wavestack.drivers.errors import DeviceDisconnected, ProtocolError
 from wavestack.drivers.u3v import bootstrap as bs
 from wavestack.drivers.u3v import gencp
 from wavestack.drivers.u3v.control import ControlChannel
-from wavestack.drivers.u3v.genicam import FeatureMap, parse_genicam
+from wavestack.drivers.genicam import NodeMap
+from wavestack.drivers.genicam.camera_features import CameraFeatures
+from wavestack.drivers.u3v.register_port import GenCPPort
 
 logger = logging.getLogger(__name__)
 
@@ -32,7 +34,6 @@ U3V_SUBCLASS = 0x05
 CONTROL_PROTOCOL = 0x00
 STREAM_PROTOCOL = 0x02
 _MAX_XML_FILE = 32 << 20
-_REQUIRED_FEATURES = ("Width", "Height", "PixelFormat", "AcquisitionStart", "AcquisitionStop")
 
 
 def _u3v_interfaces(dev: usb.core.Device) -> tuple[Any, Any] | None:
@@ -97,7 +98,7 @@ class Link:
     control: ControlChannel
     abrm: bs.Abrm
     sbrm: bs.Sbrm
-    features: FeatureMap
+    features: CameraFeatures
 
 
 def attach(dev: usb.core.Device, deadline: float, device: str,
@@ -158,8 +159,7 @@ def attach(dev: usb.core.Device, deadline: float, device: str,
     if sbrm.stream_channel_count < 1:
         raise ProtocolError(device, "SBRM reports no stream channel; expected one")
     features = _read_features(control, abrm, deadline, device)
-    for name in _REQUIRED_FEATURES:
-        features.require(name, device)
+    features.require()
     return Link(dev, (control_intf.bInterfaceNumber, stream_intf.bInterfaceNumber),
                 _endpoint(stream_intf, usb.util.ENDPOINT_IN), control, abrm, sbrm, features)
 
@@ -184,8 +184,9 @@ def release(link: Link, device: str) -> None:
     except usb.core.USBError as exc:
         logger.debug("%s: dispose_resources: %s", device, exc)
 
-def _read_features(control: ControlChannel, abrm: bs.Abrm, deadline: float, device: str) -> FeatureMap:
-    """The features of the GenICam file the manifest's first entry points at (SHA-1 checked)."""
+def _read_features(control: ControlChannel, abrm: bs.Abrm, deadline: float, device: str) -> CameraFeatures:
+    """The node map of the GenICam file the manifest's first entry points at (SHA-1 checked), on the
+    control channel."""
     table = abrm.manifest_table_address
     if bs.decode_manifest_count(control.read(table, bs.MANIFEST_COUNT_SIZE, deadline, "manifest"), device) < 1:
         raise ProtocolError(device, "manifest table is empty; expected a GenICam XML entry")
@@ -198,4 +199,7 @@ def _read_features(control: ControlChannel, abrm: bs.Abrm, deadline: float, devi
     data = control.read(entry.address, entry.size, deadline, "GenICam file")
     if any(entry.sha1) and hashlib.sha1(data).digest() != entry.sha1:
         raise ProtocolError(device, "GenICam file does not match the manifest's SHA-1")
-    return parse_genicam(data, device, zipped=entry.file_format == bs.MANIFEST_FORMAT_ZIP)
+    node_map = NodeMap.from_xml(data, device=device, zipped=entry.file_format == bs.MANIFEST_FORMAT_ZIP)
+    port = GenCPPort(control)
+    node_map.attach(port)
+    return CameraFeatures(node_map, port)

@@ -24,28 +24,30 @@ import usb.core
 import usb.util
 
 from wavestack.drivers._checks import check_timeout
-from wavestack.drivers.errors import DeviceDisconnected, DeviceError, LimitError, ProtocolError
+from wavestack.drivers.errors import DeviceDisconnected, DeviceError
+from wavestack.drivers.genicam.camera_features import CameraFeatures, unlock_quietly
+from wavestack.drivers.genicam.camera_verbs import GenICamCamera
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import FrameRing, RingPolicy
 from wavestack.drivers.role_thread import RoleThread
 from wavestack.drivers.u3v import bootstrap as bs
-from wavestack.drivers.u3v.acquisition import RingHistory, StreamReader, U3VCounters, enable_stream
+from wavestack.drivers.ring_history import RingHistory
+from wavestack.drivers.u3v.acquisition import StreamReader, U3VCounters, enable_stream
 from wavestack.drivers.u3v.connection import (CONTROL_PROTOCOL, STREAM_PROTOCOL, U3V_CLASS, U3V_SUBCLASS, Link,
                                               attach, find_device, release)
-from wavestack.drivers.u3v.feature_io import (lock_transport_layer, read_feature, unlock_transport_layer,
-                                              write_feature)
-from wavestack.drivers.u3v.genicam import Feature, FeatureMap
-from wavestack.drivers.u3v.stream import BlockAssembler, pixel_format_code
+from wavestack.drivers.u3v.stream import BlockAssembler
 
 __all__ = ["CONTROL_PROTOCOL", "STREAM_PROTOCOL", "U3V_CLASS", "U3V_SUBCLASS", "U3VCamera", "U3VCounters"]
 
 logger = logging.getLogger(__name__)
 
 
-class U3VCamera:
+class U3VCamera(GenICamCamera):
     """A USB3 Vision camera (GenCP control + one image stream) driven through pyusb.
 
-    Build it with :meth:`open`. Reading properties and setting features talk to the device; frames
+    Build it with :meth:`open`. Reading properties and setting features (the verbs of
+    :class:`~wavestack.drivers.genicam.camera_verbs.GenICamCamera`, through the device's own GenICam
+    node map) talk to the device; frames
     arrive through :meth:`start` / :meth:`read_frame` / :meth:`stop`. Use as a context manager or call
     :meth:`close`.
     """
@@ -119,6 +121,7 @@ class U3VCamera:
         self._serial = self._serial or abrm.serial_number or None
         self._name = f"U3V camera {ids} {abrm.model} SN {abrm.serial_number}"
         link.control.name = self._name
+        link.features.node_map.device = self._name
         self._link = link
         self._ring = self._history.replace(self._ring, self._name)
         self._disconnected = None
@@ -141,25 +144,8 @@ class U3VCamera:
         return self._link
 
     # ---------------------------------------------------------------------------------- features
-    def _deadline(self, timeout_s: float | None) -> float:
-        timeout = self._timeout_s if timeout_s is None else timeout_s
-        check_timeout(timeout)
-        return time.monotonic() + timeout
-
-    def _read_feature(self, name: str, deadline: float) -> int | float | str:
-        link = self._live()
-        return read_feature(link.control, link.features.require(name, self._name), deadline, self._name)
-
-    def _write_feature(self, feature: Feature, value: int | float | str, deadline: float) -> None:
-        write_feature(self._live().control, feature, value, deadline, self._name)
-
-    def _feature(self, name: str) -> Feature:
-        return self._live().features.require(name, self._name)
-
-    @property
-    def name(self) -> str:
-        """Device name used in messages (vendor:product, model, serial)."""
-        return self._name
+    def _camera_features(self) -> CameraFeatures:
+        return self._live().features
 
     @property
     def connected(self) -> bool:
@@ -171,109 +157,9 @@ class U3VCamera:
         return not self._closed and find_device(self._backend, self._serial) is not None
 
     @property
-    def features(self) -> FeatureMap:
-        """The features resolved from the device's GenICam XML."""
-        return self._live().features
-
-    @property
     def device_info(self) -> bs.Abrm:
         """Identification and timing read from the ABRM at open."""
         return self._live().abrm
-
-    @property
-    def width(self) -> int:
-        """Image width, pixels (read from the device)."""
-        return int(self._read_feature("Width", self._deadline(None)))
-
-    @property
-    def height(self) -> int:
-        """Image height, pixels (read from the device)."""
-        return int(self._read_feature("Height", self._deadline(None)))
-
-    @property
-    def pixel_format(self) -> str:
-        """Pixel format name from the XML's enumeration (``"Mono8"``, ``"Mono12"``, ...), read from the device."""
-        value = int(self._read_feature("PixelFormat", self._deadline(None)))
-        name = self._feature("PixelFormat").entry_name(value)
-        if name is None:
-            raise ProtocolError(self._name, f"PixelFormat register holds 0x{value:08X}, not an entry of the XML")
-        return name
-
-    @property
-    def exposure_us(self) -> float:
-        """Exposure time, µs (read from the device)."""
-        return float(self._read_feature("ExposureTime", self._deadline(None)))
-
-    def set_exposure_us(self, exposure_us: float, timeout_s: float) -> None:
-        """Set the exposure time ``exposure_us``, µs, waiting at most ``timeout_s`` s for the acknowledge.
-
-        Raises ``ValueError`` when it is not finite or <= 0 and ``LimitError`` outside the XML's
-        Min/Max (nothing sent in either case).
-        """
-        if not (math.isfinite(exposure_us) and exposure_us > 0):
-            raise ValueError(f"exposure_us must be finite and > 0, got {exposure_us}")
-        deadline = self._deadline(timeout_s)
-        feature = self._feature("ExposureTime")
-        low, high = feature.minimum, feature.maximum
-        if (low is not None and exposure_us < low) or (high is not None and exposure_us > high):
-            raise LimitError(self._name, f"ExposureTime {exposure_us} µs outside the device's {low}..{high} µs")
-        self._write_feature(feature, exposure_us, deadline)
-
-    def set_pixel_format(self, name: str, timeout_s: float) -> None:
-        """Select ``"Mono8"``, ``"Mono12"`` or ``"Mono16"``; only while not acquiring.
-
-        Raises
-        ------
-        ValueError
-            Unsupported name, or acquisition is running (nothing sent).
-        LimitError
-            The device's XML does not offer this format (nothing sent).
-        """
-        pixel_format_code(name)  # ValueError for names the stream decoder does not know
-        if self._acquiring:
-            raise ValueError(f"{self._name}: stop acquisition before changing the pixel format")
-        deadline = self._deadline(timeout_s)
-        feature = self._feature("PixelFormat")
-        if name not in feature.entries:
-            raise LimitError(self._name, f"PixelFormat {name!r} not offered; device has {sorted(feature.entries)}")
-        self._write_feature(feature, feature.entries[name], deadline)
-
-    def set_trigger_mode(self, on: bool, timeout_s: float) -> None:
-        """Software-triggered (``True``: one frame per :meth:`trigger_software`) or free-run (``False``)."""
-        deadline = self._deadline(timeout_s)
-        feature = self._feature("TriggerMode")
-        entry = "On" if on else "Off"
-        if entry not in feature.entries:
-            raise ProtocolError(self._name, f"TriggerMode lacks entry {entry!r}; has {sorted(feature.entries)}")
-        self._write_feature(feature, feature.entries[entry], deadline)
-
-    def read_feature(self, name: str, timeout_s: float | None = None) -> int | float | str:
-        """Read any feature the driver resolved from the XML (see :attr:`features`), e.g. ``PayloadSize``.
-
-        Integers and enumeration values come as int, floats as float, strings (``DeviceVendorName``,
-        ...) as text. Raises ``ProtocolError`` when the XML does not describe ``name`` (or not
-        within the supported subset), it is write-only, or the device refused the read.
-        """
-        return self._read_feature(name, self._deadline(timeout_s))
-
-    def set_device_user_id(self, name: str, timeout_s: float) -> None:
-        """Write ``DeviceUserID``, the user-chosen name the camera keeps (SFNC Device Control).
-
-        Raises ``ValueError`` for a name not ASCII or longer than the register (nothing sent),
-        ``ProtocolError`` when the XML has no writable ``DeviceUserID`` or the device refused it.
-        """
-        deadline = self._deadline(timeout_s)
-        self._write_feature(self._feature("DeviceUserID"), name, deadline)
-
-    def trigger_software(self, timeout_s: float) -> None:
-        """Execute TriggerSoftware (one frame when the trigger mode is on)."""
-        self._execute("TriggerSoftware", self._deadline(timeout_s))
-
-    def _execute(self, name: str, deadline: float) -> None:
-        feature = self._feature(name)
-        if feature.kind != "command" or feature.command_value is None:
-            raise ProtocolError(self._name, f"feature {name} is a {feature.kind}, expected a command")
-        self._write_feature(feature, feature.command_value, deadline)
 
     # --------------------------------------------------------------------------------- streaming
     def start(self, timeout_s: float | None = None) -> None:
@@ -289,15 +175,15 @@ class U3VCamera:
         link = self._live()
         if self._reader is not None:
             return
-        lock_transport_layer(link.control, link.features, deadline, self._name)
+        link.features.lock_transport_layer(deadline)
         try:
             sirm, sizes = enable_stream(link.control, link.sbrm.sirm_address, deadline, self._name)
             if self._ring.closed:  # the last reader gave up after repeated stream errors: start afresh
                 self._ring = self._history.replace(self._ring, self._name)
             self._ring.discard_pending()
-            self._execute("AcquisitionStart", deadline)
+            link.features.execute("AcquisitionStart", deadline)
         except DeviceError:
-            unlock_transport_layer(link.control, link.features, deadline, self._name)
+            self._log_unlock_failure(unlock_quietly(link.features, deadline))
             raise
         self._acquiring = True
         assembler = BlockAssembler(sizes, sirm.required_payload_size, self._name)
@@ -313,37 +199,12 @@ class U3VCamera:
         """True from :meth:`start` until :meth:`stop`, an unplug or too many stream errors (the thread stays)."""
         return self._reader is not None and self._reader.running
 
-    def loss_mark(self) -> int:
-        """Frames reported lost so far: take it before a trigger, pass it to :meth:`read_frame`."""
-        return self._ring.losses
-
-    def discard_pending(self) -> int:
-        """Drop the frames waiting in the ring (counted dropped); returns how many."""
-        return self._ring.discard_pending()
-
-    def read_frame(self, timeout_s: float, *, since_loss: int | None = None) -> Frame:
-        """The next frame by the ring's policy.
-
-        ``since_loss``: a :meth:`loss_mark`; a block the stream discarded since then raises
-        :class:`~wavestack.drivers.ring.FrameLost` at once (a triggered frame that will not come).
-
-        Raises
-        ------
-        DeviceTimeout
-            No frame within ``timeout_s`` (e.g. waiting for a trigger, or not started).
-        DeviceDisconnected
-            The camera was unplugged (after the pending frames are read) or closed (at once:
-            closing is final, frames still pending are not delivered).
-        """
-        if self._closed:
-            raise DeviceDisconnected(self._name, "camera closed")
-        return self._ring.get(timeout_s, fail_after_loss=since_loss)
-
     def counters(self) -> U3VCounters:
         """Frame counters over the camera's life, across reconnects, and stream health (see :class:`U3VCounters`)."""
         with self._state_lock:
             stats = dict(self._stats)
-        return self._history.with_current(self._ring, stats)
+        c = self._history.with_current(self._ring)
+        return U3VCounters(c.acquired, c.delivered, c.dropped, c.dropped_in_gaps, c.pending, **stats)
 
     def _count(self, key: str) -> None:
         with self._state_lock:
@@ -371,7 +232,7 @@ class U3VCamera:
         failure: DeviceError | None = None
         if self._disconnected is None and not self._closed and self._link is not None:
             try:
-                self._execute("AcquisitionStop", deadline)
+                self._link.features.execute("AcquisitionStop", deadline)
             except DeviceError as exc:
                 failure = exc
         self._join_reader()
@@ -381,12 +242,16 @@ class U3VCamera:
                                          deadline, "SIRM stream disable")
             except DeviceError as exc:
                 failure = failure or exc
-            unlock_transport_layer(self._link.control, self._link.features, deadline, self._name)
+            self._log_unlock_failure(unlock_quietly(self._link.features, deadline))
         if failure is not None and not isinstance(failure, DeviceDisconnected):
             try:
                 raise failure
             finally:
                 del failure  # no local naming the error: a cycle with this frame (errors.renewed)
+
+    def _log_unlock_failure(self, error: DeviceError | None) -> None:
+        if error is not None:
+            logger.warning("%s: could not clear TLParamsLocked (%s)", self._name, error)
 
     # ------------------------------------------------------------------------------ life cycle
     def _release(self) -> None:

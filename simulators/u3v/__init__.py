@@ -16,16 +16,18 @@ from wavestack.simulators.u3v.camera import SimulatedU3VCamera
 from wavestack.simulators.u3v.descriptors import (EP_ACK_IN, EP_COMMAND_OUT, EP_STREAM_IN, SIM_PRODUCT_ID,
                                                   SIM_VENDOR_ID, U3V_CLASS, U3V_SUBCLASS, U3VDescriptorSet,
                                                   u3v_descriptors)
-from wavestack.simulators.u3v.device_description import FEATURES, FeatureSpec
+from wavestack.simulators.u3v.device_description import FEATURES, DeviceIdentity, FeatureSpec
 from wavestack.simulators.u3v.genicam_xml import genicam_xml
-from wavestack.simulators.u3v.register_map import GenCPStatus
+from wavestack.simulators.u3v.register_map import GenCPStatus, Register, RegisterMap
+from wavestack.simulators.u3v.registers import feature_register, vendor_registers
 from wavestack.simulators.u3v.settings import (CorruptionKind, FrameRenderer, U3VSimCounters, U3VSimFaults,
                                                U3VSimSettings)
 from wavestack.simulators.u3v.stream_device import PIXEL_FORMATS
 
 __all__ = [
-    "EP_ACK_IN", "EP_COMMAND_OUT", "EP_STREAM_IN", "FEATURES", "PIXEL_FORMATS", "SIM_PRODUCT_ID", "SIM_VENDOR_ID",
+    "EP_ACK_IN", "EP_COMMAND_OUT", "EP_STREAM_IN", "FEATURES", "DeviceIdentity", "PIXEL_FORMATS", "SIM_PRODUCT_ID", "SIM_VENDOR_ID",
     "U3V_CLASS", "U3V_SUBCLASS", "CorruptionKind", "FeatureSpec", "FrameRenderer", "GenCPStatus",
-    "SimulatedU3VCamera", "SimulatedUsbBackend", "U3VDescriptorSet", "U3VSimCounters", "U3VSimFaults",
-    "U3VSimSettings", "genicam_xml", "u3v_descriptors", "usb_error",
+    "Register", "RegisterMap", "SimulatedU3VCamera", "SimulatedUsbBackend", "U3VDescriptorSet", "U3VSimCounters",
+    "U3VSimFaults", "U3VSimSettings", "feature_register", "genicam_xml", "u3v_descriptors", "usb_error",
+    "vendor_registers",
 ]

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from wavestack.simulators.genicam import PERSONALITIES, read_vendor_xml
 from wavestack.simulators.u3v.descriptors import (EP_STREAM_IN, DeviceUnplugged, EndpointHalted, TransferOverflow,
                                                   TransferTimeout)
 from wavestack.simulators.u3v.gencp_device import GenCPDevice
@@ -253,7 +254,10 @@ class SimulatedU3VCamera:
         self._stream.reset()
         if hasattr(self, "_gencp"):
             self._commands_before += self._gencp.commands_received
-        registers = build_register_map(self._identity, _RegisterHooks(self), zipped_xml=s.zipped_xml)
+        vendor = None
+        if s.vendor is not None and s.vendor_xml is not None:
+            vendor = (PERSONALITIES[s.vendor], read_vendor_xml(s.vendor_xml))
+        registers = build_register_map(self._identity, _RegisterHooks(self), zipped_xml=s.zipped_xml, vendor=vendor)
         self._gencp = GenCPDevice(registers, max_command_bytes=s.max_transfer_bytes,
                                   max_ack_bytes=s.max_transfer_bytes)
 

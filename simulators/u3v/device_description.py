@@ -52,6 +52,8 @@ class FeatureSpec:
         The SFNC category the XML lists it in.
     locked_by
         Name of the feature that locks it while non-zero (``pIsLocked``), or None.
+    invalidated_by
+        Features whose writes change this register's value (its register's ``pInvalidator``).
     """
 
     name: str
@@ -66,6 +68,7 @@ class FeatureSpec:
     unit: str = ""
     category: str = "AcquisitionControl"
     locked_by: str | None = None
+    invalidated_by: tuple[str, ...] = ()
 
 
 PIXEL_FORMAT_ENTRIES: tuple[tuple[str, int], ...] = (("Mono8", 0x0108_0001), ("Mono12", 0x0110_0005),
@@ -89,7 +92,8 @@ FEATURES: tuple[FeatureSpec, ...] = (
     FeatureSpec("AcquisitionStop", "Command", FEATURE_BASE_ADDRESS + 0x20, 4, "WO"),
     FeatureSpec("AcquisitionMode", "Enumeration", FEATURE_BASE_ADDRESS + 0x24, 4, "RW",
                 entries=ACQUISITION_MODE_ENTRIES),
-    FeatureSpec("PayloadSize", "Integer", FEATURE_BASE_ADDRESS + 0x28, 4, "RO", category="TransportLayerControl"),
+    FeatureSpec("PayloadSize", "Integer", FEATURE_BASE_ADDRESS + 0x28, 4, "RO", category="TransportLayerControl",
+                invalidated_by=("Width", "Height", "PixelFormat")),
     FeatureSpec("TLParamsLocked", "Integer", FEATURE_BASE_ADDRESS + 0x2C, 4, "RW", 0, 1,
                 category="TransportLayerControl"),
 )

@@ -24,31 +24,36 @@ FILE_TYPE_ZIP = 1
 CATEGORIES = ("DeviceControl", "ImageFormatControl", "AcquisitionControl", "TransportLayerControl")
 
 
+def child(parent: ET.Element, tag: str, text: str | None = None, **attrs: str) -> ET.Element:
+    """A new sub-element of ``parent`` with ``text`` and attributes."""
+    element = ET.SubElement(parent, tag, attrs)
+    element.text = text
+    return element
+
+
 def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FEATURES,
-                strings: tuple[StringFeatureSpec, ...] = DEVICE_STRINGS) -> bytes:
+                strings: tuple[StringFeatureSpec, ...] = DEVICE_STRINGS, *, big_endian: bool = False,
+                tooltip: str = "wavestack simulated USB3 Vision camera") -> bytes:
     """The device's GenICam XML (GenApi schema 1.1 subset of the protocol sheet), UTF-8 bytes.
 
     Each feature is an ``Integer``/``Float``/``Enumeration``/``Command`` node whose ``pValue`` names
-    an ``IntReg``/``FloatReg`` called ``<Feature>Reg`` (little-endian, hexadecimal ``Address``); a
-    feature another one locks carries ``pIsLocked``. Each string feature is a ``StringReg`` on its
+    an ``IntReg``/``FloatReg`` called ``<Feature>Reg`` (little-endian unless ``big_endian``, as GigE
+    Vision registers are; hexadecimal ``Address``); a
+    feature another one locks carries ``pIsLocked``, a register other writes change names them in
+    ``pInvalidator``. Each string feature is a ``StringReg`` on its
     ABRM string. The SFNC categories (:data:`CATEGORIES`) under ``Root`` list every feature, and a
     ``Port`` node named ``Device`` is included as any GenICam file has it.
     """
     guid = uuid.uuid5(uuid.NAMESPACE_DNS, f"{identity.manufacturer}.{identity.model}.wavestack")
     root = ET.Element("RegisterDescription", {
         "ModelName": identity.model, "VendorName": identity.manufacturer,
-        "ToolTip": "wavestack simulated USB3 Vision camera", "StandardNameSpace": "None",
+        "ToolTip": tooltip, "StandardNameSpace": "None",
         "SchemaMajorVersion": "1", "SchemaMinorVersion": "1", "SchemaSubMinorVersion": "0",
         "MajorVersion": "1", "MinorVersion": "0", "SubMinorVersion": "0",
         "ProductGuid": str(guid), "VersionGuid": str(uuid.uuid5(guid, identity.device_version)),
         "xmlns": GENICAM_NAMESPACE, "xmlns:xsi": "http://www.w3.org/2001/XMLSchema-instance",
         "xsi:schemaLocation": f"{GENICAM_NAMESPACE} http://www.genicam.org/GenApi/GenApiSchema_Version_1_1.xsd",
     })
-
-    def child(parent: ET.Element, tag: str, text: str | None = None, **attrs: str) -> ET.Element:
-        element = ET.SubElement(parent, tag, attrs)
-        element.text = text
-        return element
 
     members = [(spec.category, spec.name) for spec in (*strings, *features)]
     categories = {"Root": [c for c in CATEGORIES if any(c == category for category, _ in members)]}
@@ -88,9 +93,11 @@ def genicam_xml(identity: DeviceIdentity, features: tuple[FeatureSpec, ...] = FE
         child(reg, "Length", str(spec.length))
         child(reg, "AccessMode", spec.access)
         child(reg, "pPort", "Device")
+        for feature in spec.invalidated_by:
+            child(reg, "pInvalidator", feature + "Reg")
         if spec.kind != "Float":
             child(reg, "Sign", "Unsigned")
-        child(reg, "Endianess", "LittleEndian")
+        child(reg, "Endianess", "BigEndian" if big_endian else "LittleEndian")
     child(root, "Port", Name="Device", NameSpace="Standard")
     ET.indent(root)
     return ET.tostring(root, encoding="utf-8", xml_declaration=True)

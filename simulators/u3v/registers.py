@@ -33,6 +33,7 @@ import struct
 from collections.abc import Callable
 from typing import Protocol
 
+from wavestack.simulators.genicam import VendorPersonality, register_accessors
 from wavestack.simulators.u3v.device_description import (ABRM_ADDRESS, DEVICE_STRINGS, FEATURE_BASE_ADDRESS, FEATURES,
                                                          PIXEL_FORMAT_ENTRIES, DeviceIdentity, FeatureKind,
                                                          FeatureSpec)
@@ -44,7 +45,7 @@ __all__ = [
     "ABRM_ADDRESS", "FEATURE_BASE_ADDRESS", "FEATURES", "FILE_TYPE_XML", "FILE_TYPE_ZIP", "GENICAM_NAMESPACE",
     "MANIFEST_ADDRESS", "PIXEL_FORMAT_ENTRIES", "SBRM_ADDRESS", "SIRM_ADDRESS", "SIRM_FIELDS", "SIRM_LENGTH",
     "XML_ADDRESS", "XML_FILE_NAME", "AccessMode", "DeviceIdentity", "FeatureKind", "FeatureSpec", "GenCPStatus",
-    "Register", "RegisterHooks", "RegisterMap", "build_register_map", "genicam_xml", "manifest_file",
+    "Register", "RegisterHooks", "RegisterMap", "build_register_map", "feature_register", "genicam_xml", "vendor_registers", "manifest_file",
 ]
 
 SBRM_ADDRESS = 0x0000_1000
@@ -194,14 +195,16 @@ def _sirm(hooks: RegisterHooks) -> list[Register]:
     return registers
 
 
-def _feature_register(spec: FeatureSpec, hooks: RegisterHooks) -> Register:
+def feature_register(spec: FeatureSpec, hooks: RegisterHooks, *, big_endian: bool = False) -> Register:
+    """The register behind one feature of :data:`FEATURES` (range-checked writes, the camera's state on reads)."""
+    order = ">" if big_endian else "<"
     def write(data: bytes) -> GenCPStatus:
         if spec.kind == "Float":
-            value: float | int = struct.unpack("<d", data)[0]
+            value: float | int = struct.unpack(order + "d", data)[0]
             if not math.isfinite(value):
                 return GenCPStatus.INVALID_PARAMETER
         else:
-            value = int.from_bytes(data, "little")
+            value = int.from_bytes(data, "big" if big_endian else "little")
         if spec.kind == "Command" and value != spec.command_value:
             return GenCPStatus.INVALID_PARAMETER
         if spec.kind == "Enumeration" and value not in {v for _, v in spec.entries}:
@@ -213,8 +216,8 @@ def _feature_register(spec: FeatureSpec, hooks: RegisterHooks) -> Register:
     def read() -> bytes:
         value = hooks.get_feature(spec.name)
         if spec.kind == "Float":
-            return struct.pack("<d", float(value))
-        return int(value).to_bytes(spec.length, "little")
+            return struct.pack(order + "d", float(value))
+        return int(value).to_bytes(spec.length, "big" if big_endian else "little")
 
     return Register(spec.name + "Reg", spec.address, spec.length, spec.access, read, write)
 
@@ -228,7 +231,18 @@ def _manifest(file: bytes, format_info: int) -> list[Register]:
             _constant("GenICamFile", XML_ADDRESS, file)]
 
 
-def build_register_map(identity: DeviceIdentity, hooks: RegisterHooks, *, zipped_xml: bool) -> RegisterMap:
+def vendor_registers(personality: VendorPersonality, hooks: RegisterHooks) -> list[Register]:
+    """The registers of a real camera's map, on this camera's state."""
+    registers = []
+    for spec in personality.registers:
+        read, write = register_accessors(personality, spec, hooks, GenCPStatus.INVALID_PARAMETER)
+        registers.append(Register(f"{personality.name}@0x{spec.address:X}", spec.address, spec.length, spec.access,
+                                  read, None if write is None else (lambda data, w=write: GenCPStatus(w(data)))))
+    return registers
+
+
+def build_register_map(identity: DeviceIdentity, hooks: RegisterHooks, *, zipped_xml: bool,
+                       vendor: tuple[VendorPersonality, bytes] | None = None) -> RegisterMap:
     """The complete register space of one simulated camera.
 
     Parameters
@@ -239,8 +253,14 @@ def build_register_map(identity: DeviceIdentity, hooks: RegisterHooks, *, zipped
         The device behind the SIRM and feature registers.
     zipped_xml
         Serve the GenICam file as a ZIP archive instead of plain XML.
+    vendor
+        A real camera's register map and its XML, served instead of the simulator's own.
     """
-    file, format_info = manifest_file(genicam_xml(identity), zipped_xml)
+    xml = genicam_xml(identity) if vendor is None else vendor[1]
+    file, format_info = manifest_file(xml, zipped_xml)
     registers = _abrm(identity, hooks) + _sbrm(identity) + _sirm(hooks) + _manifest(file, format_info)
-    registers += [_feature_register(spec, hooks) for spec in FEATURES]
+    if vendor is None:
+        registers += [feature_register(spec, hooks) for spec in FEATURES]
+    else:
+        registers += vendor_registers(vendor[0], hooks)
     return RegisterMap(registers)

@@ -56,6 +56,10 @@ class U3VSimSettings:
         SIRM SI info alignment: transfer sizes must be multiples of 2**n bytes.
     vendor_id, product_id
         USB ids (pid.codes test ids by default).
+    vendor, vendor_xml
+        A real camera's register map (a name of :data:`wavestack.simulators.genicam.PERSONALITIES`)
+        and the path of its GenApi XML: the camera then serves that XML and those registers
+        instead of its own; None keeps the simulator's own XML.
     """
 
     serial: str = "WS-SIM-0001"
@@ -72,8 +76,12 @@ class U3VSimSettings:
     payload_alignment_log2: int = 0
     vendor_id: int = SIM_VENDOR_ID
     product_id: int = SIM_PRODUCT_ID
+    vendor: str | None = None
+    vendor_xml: str | None = None
 
     def __post_init__(self) -> None:
+        if (self.vendor is None) != (self.vendor_xml is None):
+            raise ValueError("U3VSimSettings: vendor and vendor_xml go together (a register map and its XML)")
         if not (1 <= self.width <= MAX_IMAGE_SIDE and 1 <= self.height <= MAX_IMAGE_SIDE):
             raise ValueError(f"U3VSimSettings: width/height must lie in 1..{MAX_IMAGE_SIDE}, "
                              f"got {self.width} x {self.height}")

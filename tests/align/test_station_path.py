@@ -66,3 +66,23 @@ def test_a_grid_that_would_alias_is_refused() -> None:
     config = replace(CONFIG, align=replace(CONFIG.align, null_tilt=False))
     with pytest.raises(InputError, match=r"null_tilt = false.*expected pixels of at most"):
         check_fringes(config, TmaModel(CONFIG.design))
+
+
+def test_the_alignment_measures_through_a_gige_camera_as_through_usb3(tmp_path) -> None:  # noqa: ANN001
+    """[camera] url = "sim://gige" in the alignment's station file: the same maps through GigE Vision."""
+    station = CONFIG.station_path()
+    assert station is not None
+    text = station.read_text()
+    assert 'url = "sim://u3v"' in text
+    gige_station = tmp_path / "station-gige.toml"
+    gige_station.write_text(text.replace('url = "sim://u3v"', 'url = "sim://gige"'))
+    config = replace(CONFIG, align=replace(CONFIG.align, station=str(gige_station)))
+    mount = HexapodPose(0.0, 0.01, 0.01, 0.001, 0.0, 0.0)
+    with ExitStack() as stack:
+        session = open_session(config, stack, mount=mount)
+        measured = session.measure(0)
+        truth = session.bench.wavefront().waves
+    mask = session.fitter.mask
+    truth = np.where(mask, truth - np.nanmean(truth[mask]), np.nan)
+    error = measured.waves[mask] - truth[mask]
+    assert np.std(error) < 0.01 * np.nanstd(truth), np.std(error)  # as through USB3 Vision, above

@@ -40,6 +40,16 @@ def add_sim_arguments(parser: argparse.ArgumentParser) -> None:
     hexapod.add_argument("--port", type=int, default=0, help="TCP port; 0 picks a free one (default)")
     hexapod.add_argument("--allow-remote", action="store_true",
                          help="allow a non-loopback host (GCS over TCP has no authentication)")
+    gige = devices.add_parser("gige", help="GigE Vision camera (GVCP/GVSP on UDP) looking at the simulated optic",
+                              description="Serve a simulated GigE Vision camera; prints 'listening HOST:PORT'. "
+                                          "Port 3956 (GVCP's own) lets aravis' arv-tool find it.")
+    gige.add_argument("--config", type=Path, help="station TOML with [optic] and [camera.simulator] (default: built in)")
+    gige.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    gige.add_argument("--port", type=int, default=0, help="UDP port; 0 picks a free one (default), 3956 is GVCP's")
+    gige.add_argument("--allow-remote", action="store_true",
+                      help="allow a non-loopback host (GVCP has no authentication)")
+    gige.add_argument("--vendor", help="serve a real camera's register map (flir-bfs, alvium-1800u, basler-ace-gige)")
+    gige.add_argument("--vendor-xml", type=Path, help="that camera's GenApi XML file (with --vendor)")
     bench = devices.add_parser("align-bench", help="the TMA alignment bench: hexapod, field stage, camera, piezo",
                                description="Serve the simulated alignment bench as a real one's devices (PI "
                                            "hexapod and field stage on GCS over TCP, the camera's USB bus over "
@@ -75,6 +85,12 @@ def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             run_align_bench_simulator(args.config, args.host, (args.hexapod_port, args.field_stage_port,
                                                                args.camera_port), args.allow_remote, args.seed,
                                       _announce, stop, piezo_port=args.piezo_port)
+    elif args.device == "gige":
+        from wavestack.cli.sim_gige import run_gige_simulator
+
+        def runner() -> None:
+            run_gige_simulator(args.config, args.host, args.port, args.allow_remote, _announce, stop,
+                               vendor=args.vendor, vendor_xml=args.vendor_xml)
     elif args.device == "hexapod":
         from wavestack.cli.sim_hexapod import run_hexapod_simulator
 
@@ -94,7 +110,7 @@ def run_sim(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 COMMAND = Command(
     "sim",
-    help="run a simulated instrument standalone (pzt, plc, hexapod, align-bench)",
+    help="run a simulated instrument standalone (pzt, plc, hexapod, gige, align-bench)",
     description="Run one simulated instrument on its real transport until Ctrl-C or SIGTERM.",
     add_arguments=add_sim_arguments, handler=run_sim,
     subject=lambda args: str(args.config) if args.config else f"sim {args.device}",

@@ -5,6 +5,9 @@
 bench (a pyusb backend the station builds itself, see :mod:`wavestack.simulators.bench`), and
 ``usbtcp://HOST:PORT[/SERIAL]`` a camera whose USB bus is served over TCP by another process
 (:mod:`wavestack.drivers.usb_tcp`: the remote alignment-bench simulator's camera).
+``gige://ADDRESS[:PORT]`` opens a GigE Vision camera by its address, ``gige://SERIAL`` by the
+serial its DISCOVERY reports (``?via=HOST[:PORT]`` asks one address instead of broadcasting), and
+``sim://gige`` the simulated bench's camera as a GigE Vision camera on loopback.
 ``[camera.simulator]`` describes that simulated camera. Example::
 
     [camera]
@@ -20,6 +23,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from wavestack.config.schema import ConfigError, device_tables, parse_section, setting
+from wavestack.drivers.gige.discovery import parse_gige_url
 from wavestack.drivers.usb_tcp import parse_usbtcp_url
 
 PixelFormat = Literal["Mono8", "Mono12", "Mono16"]
@@ -29,9 +33,10 @@ PixelFormat = Literal["Mono8", "Mono12", "Mono16"]
 class CameraSettings:
     """``[camera]``: which camera and how to set it up."""
 
-    url: str = setting("sim://u3v", url_kinds=("usb", "sim", "usbtcp"),
-                       doc="usb:// (first camera), usb://SERIAL, sim://u3v (simulated bench), or "
-                           "usbtcp://HOST:PORT[/SERIAL] (a USB bus served over TCP)")
+    url: str = setting("sim://u3v", url_kinds=("usb", "sim", "usbtcp", "gige"),
+                       doc="usb:// (first camera), usb://SERIAL, sim://u3v or sim://gige (simulated bench), "
+                           "usbtcp://HOST:PORT[/SERIAL] (a USB bus served over TCP), gige://ADDRESS[:PORT] or "
+                           "gige://SERIAL (GigE Vision)")
     pixel_format: PixelFormat | None = setting(None, doc="set at start; absent keeps the camera's")
     exposure_us: float | None = setting(None, minimum=1.0, maximum=10_000_000.0, doc="exposure, microseconds")
     timeout_s: float = setting(2.0, minimum=0.01, maximum=60.0, doc="open and per-frame timeout, s")
@@ -50,6 +55,11 @@ class CameraSettings:
     @property
     def simulated(self) -> bool:
         return self.url.startswith("sim://")
+
+    @property
+    def transport(self) -> Literal["u3v", "gige"]:
+        """``"gige"`` for GigE Vision (``gige://``, ``sim://gige``), ``"u3v"`` for USB3 Vision."""
+        return "gige" if self.url.startswith("gige://") or self.url == "sim://gige" else "u3v"
 
 
 @dataclass(frozen=True)
@@ -81,6 +91,12 @@ def parse_camera_config(document: Mapping[str, Any], *, source: str) -> tuple[Ca
             parse_usbtcp_url(settings.url)
         except ValueError as error:
             raise ConfigError(f"{source}: [camera] {error}") from None
-    if settings.simulated and settings.url != "sim://u3v":
-        raise ConfigError(f"{source}: [camera] url: expected sim://u3v for the simulated camera, got {settings.url!r}")
+    if settings.url.startswith("gige://"):
+        try:
+            parse_gige_url(settings.url)
+        except ValueError as error:
+            raise ConfigError(f"{source}: [camera] {error}") from None
+    if settings.simulated and settings.url not in ("sim://u3v", "sim://gige"):
+        raise ConfigError(f"{source}: [camera] url: expected sim://u3v or sim://gige for the simulated camera, "
+                          f"got {settings.url!r}")
     return settings, simulator

@@ -30,7 +30,7 @@ from wavestack.pipeline import InputError
 T = TypeVar("T")
 
 #: URL kinds a device field may allow. ``device`` is a local device path (``/dev/...``, ``COMn``).
-URL_KINDS = ("sim", "socket", "tcp", "usb", "usbtcp", "device")
+URL_KINDS = ("sim", "socket", "tcp", "usb", "usbtcp", "gige", "device")
 #: Integers are TOML's: signed 64-bit.
 _INT64 = (-(2 ** 63), 2 ** 63 - 1)
 _SCHEME = re.compile(r"^([a-z][a-z0-9+.-]*)://")
@@ -75,7 +75,7 @@ def setting(
 
 
 def url_kind(url: str) -> str | None:
-    """The kind of a device URL (``sim``, ``socket``, ``tcp``, ``usb``, ``device``) or None.
+    """The kind of a device URL (``sim``, ``socket``, ``tcp``, ``usb``, ``usbtcp``, ``gige``, ``device``) or None.
 
     ``device`` only says the URL is written as a local path; whether that path is allowed is
     :func:`~wavestack.config.device_path.check_device_path`'s decision (resolved, symlinks

@@ -21,6 +21,8 @@ from wavestack.drivers.errors import DeviceDisconnected
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration
 from wavestack.drivers.plc import CommandLimits, PolishingLink
+from wavestack.drivers.genicam.camera_verbs import GenICamCamera
+from wavestack.drivers.gige import GigECamera
 from wavestack.drivers.u3v import U3VCamera
 from wavestack.drivers.usb_tcp import UsbTcpBackend, parse_usbtcp_url
 from wavestack.config import BIT_DEPTH, StationConfig, build_calibration, build_piezo, build_simulated_device
@@ -29,6 +31,7 @@ from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, Simu
 from wavestack.simulators.optic import TestOptic
 from wavestack.simulators.plc import PlcSimulator, PolishingMachine
 from wavestack.simulators.spots import SpotRenderer, SpotTruth
+from wavestack.simulators.gige import GigESimSettings, SimulatedGigECamera
 from wavestack.simulators.u3v import U3VSimSettings
 from wavestack.station.sim_truth import InterferometerTruthCheck, ShackHartmannTruthCheck
 from wavestack.station.truth import TruthCheck
@@ -42,7 +45,7 @@ class StationDevices:
 
     Attributes
     ----------
-    camera : U3VCamera
+    camera : U3VCamera or GigECamera
     piezo : MDT693B or None
     calibration : PhaseStepCalibration or None
     link : PolishingLink or None
@@ -53,7 +56,7 @@ class StationDevices:
         Compares results with the simulator's truth, when the camera is simulated.
     """
 
-    camera: U3VCamera
+    camera: U3VCamera | GigECamera
     piezo: MDT693B | None = None
     calibration: PhaseStepCalibration | None = None
     link: PolishingLink | None = None
@@ -75,7 +78,7 @@ class StationDevices:
             return None
 
 
-def configure_camera(camera: U3VCamera, config: StationConfig) -> None:
+def configure_camera(camera: GenICamCamera, config: StationConfig) -> None:
     """Apply the configured pixel format, exposure and trigger mode (again after a reopen)."""
     timeout = config.camera.timeout_s
     if config.camera.pixel_format is not None:
@@ -129,21 +132,26 @@ def simulated_interferometer(config: StationConfig) -> tuple[SimulatedInterferom
     if config.pzt is not None and config.pzt.url.startswith("sim://"):
         assert config.pzt_simulator is not None
         piezo_device = build_simulated_device(config.pzt_simulator)
-    bench = SimulatedInterferometer(
-        TestOptic(optic_settings, sim.height, sim.width),
-        U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
-                       frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml),
-        piezo_device, config.bench)
+    bench = SimulatedInterferometer(TestOptic(optic_settings, sim.height, sim.width), _simulated_camera(config),
+                                    piezo_device, config.bench)
     return bench, piezo_device
+
+
+def _simulated_camera(config: StationConfig) -> U3VSimSettings | GigESimSettings:
+    """The simulated camera ``[camera.simulator]`` describes, on the transport ``[camera] url`` names."""
+    sim = config.camera_simulator
+    if config.camera.transport == "gige":
+        return GigESimSettings(serial=sim.serial[:16], width=sim.width, height=sim.height,
+                               pixel_format=sim.pixel_format, frame_rate_hz=sim.frame_rate_hz)
+    return U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
+                          frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml)
 
 
 def _simulated_shack_hartmann(config: StationConfig) -> SimulatedShackHartmann:
     sim = config.camera_simulator
     assert config.optic is not None and config.lenslets is not None  # required by parse_station_config
     spots = SpotRenderer(TestOptic(config.optic, sim.height, sim.width), config.lenslets, sim.height, sim.width)
-    return SimulatedShackHartmann(
-        spots, U3VSimSettings(serial=sim.serial, width=sim.width, height=sim.height, pixel_format=sim.pixel_format,
-                              frame_rate_hz=sim.frame_rate_hz, zipped_xml=sim.zipped_xml))
+    return SimulatedShackHartmann(spots, _simulated_camera(config))
 
 
 def _truth_check(bench: SimulatedInterferometer | SimulatedShackHartmann | None,
@@ -164,6 +172,23 @@ def _usb_backend(url: str, stack: ExitStack, timeout_s: float) -> UsbTcpBackend 
     backend = UsbTcpBackend(host, port, io_timeout_s=timeout_s)
     stack.callback(backend.close)
     return backend
+
+
+def _open_camera(config: StationConfig, bench: SimulatedInterferometer | SimulatedShackHartmann | None,
+                 stack: ExitStack) -> U3VCamera | GigECamera:
+    """The station's camera on its transport (a simulated GigE camera is started here, stopped by ``stack``)."""
+    settings = config.camera
+    if isinstance(bench, (SimulatedInterferometer, SimulatedShackHartmann)) and \
+            isinstance(bench.camera, SimulatedGigECamera):
+        stack.enter_context(bench.camera)
+        return GigECamera.open(bench.camera.url, timeout_s=settings.timeout_s, ring_capacity=settings.ring_capacity)
+    if settings.transport == "gige":
+        return GigECamera.open(settings.url, timeout_s=settings.timeout_s, ring_capacity=settings.ring_capacity)
+    if bench is not None:
+        return U3VCamera.open(backend=bench.backend, timeout_s=settings.timeout_s,
+                              ring_capacity=settings.ring_capacity)
+    return U3VCamera.open(backend=_usb_backend(settings.url, stack, settings.timeout_s), serial=settings.serial,
+                          timeout_s=settings.timeout_s, ring_capacity=settings.ring_capacity)
 
 
 def _piezo_url(url: str, name: str) -> str:
@@ -196,10 +221,7 @@ def open_station_devices(config: StationConfig, stack: ExitStack, *, job_folder:
             bench = _simulated_shack_hartmann(config)
         else:
             bench, piezo_device = simulated_interferometer(config)
-        camera = U3VCamera.open(backend=bench.backend, timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
-    else:
-        camera = U3VCamera.open(backend=_usb_backend(config.camera.url, stack, timeout), serial=config.camera.serial,
-                                timeout_s=timeout, ring_capacity=config.camera.ring_capacity)
+    camera = _open_camera(config, bench, stack)
     stack.callback(camera.close)
     configure_camera(camera, config)
     devices = StationDevices(camera=camera, bench=bench, truth_check=_truth_check(bench, config))

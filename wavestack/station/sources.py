@@ -28,6 +28,7 @@ from wavestack.drivers.mdt693b import MDT693B, PhaseStepCalibration, acquire_pha
 from wavestack.drivers.mdt693b.phase_stepping import AcquisitionCancelled
 from wavestack.drivers.ring import FrameLost, FrameRing, RingPolicy, WaitTimeout
 from wavestack.drivers.role_thread import Job, RoleThread
+from wavestack.drivers.gige import GigECamera
 from wavestack.drivers.u3v import U3VCamera
 from wavestack.station.counters import Counters, FrameCounts, SetCounts
 
@@ -44,7 +45,7 @@ class _CameraFrames:
     (the camera's start drops them, counted).
     """
 
-    def __init__(self, camera: U3VCamera) -> None:
+    def __init__(self, camera: U3VCamera | GigECamera) -> None:
         self._camera = camera
         before = camera.counters()
         self._before = (before.delivered, before.dropped)
@@ -65,7 +66,7 @@ class CarrierSource:
 
     frames_per_set = 1
 
-    def __init__(self, camera: U3VCamera) -> None:
+    def __init__(self, camera: U3VCamera | GigECamera) -> None:
         self._camera = camera
         self._frames: _CameraFrames | None = None
 
@@ -97,7 +98,7 @@ class _SetInHand:
     (:class:`~wavestack.drivers.ring.FrameLost`) instead of after the whole timeout.
     """
 
-    def __init__(self, camera: U3VCamera, stop: threading.Event, frame_timeout_s: float) -> None:
+    def __init__(self, camera: U3VCamera | GigECamera, stop: threading.Event, frame_timeout_s: float) -> None:
         self._camera = camera
         self._stop = stop
         self._frame_timeout_s = frame_timeout_s
@@ -131,7 +132,7 @@ class PhaseStepSource:
 
     Parameters
     ----------
-    camera : U3VCamera
+    camera : U3VCamera or GigECamera
         In trigger mode.
     piezo : MDT693B
         Open.
@@ -161,7 +162,7 @@ class PhaseStepSource:
     (camera delivered minus those accounted for) are between 0 and one set, and checked to be.
     """
 
-    def __init__(self, camera: U3VCamera, piezo: MDT693B, *, axis: str, steps_rad: Sequence[float],
+    def __init__(self, camera: U3VCamera | GigECamera, piezo: MDT693B, *, axis: str, steps_rad: Sequence[float],
                  calibration: PhaseStepCalibration, settle_s: float, timeout_s: float, ring_capacity: int,
                  frame_timeout_s: float | None = None, role: RoleThread | None = None) -> None:
         self._camera = camera

@@ -15,7 +15,6 @@ from hypothesis import strategies as st
 from wavestack.drivers import ProtocolError
 from wavestack.drivers.u3v import bootstrap as bs
 from wavestack.drivers.u3v import gencp
-from wavestack.drivers.u3v.genicam import parse_genicam
 from wavestack.drivers.u3v.stream import (AssembledBlock, BlockAssembler, DiscardedBlock, check_block, decode_pixels,
                                           parse_leader, parse_trailer)
 
@@ -159,100 +158,6 @@ def test_transfer_sizes_cover_the_payload(payload: int, log2_alignment: int, max
         assert size % alignment == 0
     assert sizes.payload_size <= alignment * max_factor
     assert sizes.max_leader_size >= 52 and sizes.max_trailer_size >= 32
-
-
-# ----------------------------------------------------------------------------------- GenICam
-NS = "http://www.genicam.org/GenApi/Version_1_1"
-
-
-def int_reg(name: str, address: int, access: str = "RW", length: int = 4, extra: str = "") -> str:
-    return (f'<IntReg Name="{name}"><Address>0x{address:X}</Address><Length>{length}</Length>'
-            f'<AccessMode>{access}</AccessMode><pPort>Device</pPort><Endianess>LittleEndian</Endianess>'
-            f'<Sign>Unsigned</Sign>{extra}</IntReg>')
-
-
-def build_xml(width_node: str | None = None, extra: str = "") -> bytes:
-    width = width_node or '<Integer Name="Width"><pValue>WidthReg</pValue><Min>8</Min><Max>4096</Max></Integer>'
-    body = "".join([
-        width, int_reg("WidthReg", 0x1000),
-        '<Group Name="G"><Integer Name="Height"><pValue>HeightReg</pValue></Integer></Group>',
-        int_reg("HeightReg", 0x1004, "RO"),
-        '<Enumeration Name="PixelFormat"><EnumEntry Name="Mono8"><Value>0x01080001</Value></EnumEntry>'
-        '<EnumEntry Name="Mono12"><Value>17825797</Value></EnumEntry><pValue>PixelFormatReg</pValue></Enumeration>',
-        int_reg("PixelFormatReg", 0x1008),
-        '<Float Name="ExposureTime"><ToolTip>us</ToolTip><pValue>ExposureReg</pValue><Min>10</Min>'
-        '<Max>1e6</Max></Float>',
-        '<FloatReg Name="ExposureReg"><Address>0x100C</Address><Length>8</Length><AccessMode>RW</AccessMode>'
-        '<Endianess>LittleEndian</Endianess></FloatReg>',
-        '<Command Name="AcquisitionStart"><pValue>AcqReg</pValue><CommandValue>1</CommandValue></Command>',
-        int_reg("AcqReg", 0x1020, "WO"),
-        extra,
-    ])
-    return f'<?xml version="1.0" encoding="utf-8"?><RegisterDescription xmlns="{NS}">{body}</RegisterDescription>'.encode()
-
-
-def zipped(data: bytes, names: tuple[str, ...] = ("camera.xml",)) -> bytes:
-    buffer = io.BytesIO()
-    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
-        for name in names:
-            archive.writestr(name, data)
-    return buffer.getvalue()
-
-
-@pytest.mark.parametrize("as_zip", [False, True])
-def test_genicam_features(as_zip: bool) -> None:
-    xml = build_xml()
-    features = parse_genicam(zipped(xml) if as_zip else xml, DEV, zipped=as_zip)
-    width = features.require("Width", DEV)
-    assert (width.kind, width.register.address, width.register.length, width.register.access) == (
-        "integer", 0x1000, 4, "RW")
-    assert (width.minimum, width.maximum) == (8, 4096)
-    assert features.require("Height", DEV).register.access == "RO"  # found inside a Group
-    pixel = features.require("PixelFormat", DEV)
-    assert dict(pixel.entries) == {"Mono8": MONO8, "Mono12": MONO12} and pixel.entry_name(MONO12) == "Mono12"
-    exposure = features.require("ExposureTime", DEV)
-    assert exposure.register.is_float and exposure.register.length == 8 and exposure.maximum == 1e6
-    start = features.require("AcquisitionStart", DEV)
-    assert start.kind == "command" and start.command_value == 1 and not start.register.readable
-    assert "TriggerMode" not in features
-    with pytest.raises(ProtocolError, match="TriggerMode"):
-        features.require("TriggerMode", DEV)
-
-
-@pytest.mark.parametrize("width_node,extra", [
-    ('<IntSwissKnife Name="Width"><Formula>1</Formula></IntSwissKnife>', ""),
-    ('<Integer Name="Width"><pValue>WidthReg</pValue><pIndex>X</pIndex></Integer>', ""),
-    ('<Integer Name="Width"><pValue>Nowhere</pValue></Integer>', ""),
-    ('<Integer Name="Width"><pValue>WidthMasked</pValue></Integer>', '<MaskedIntReg Name="WidthMasked"/>'),
-    ('<Integer Name="Width"><pValue>WidthBE</pValue></Integer>',
-     int_reg("WidthBE", 0x2000).replace("LittleEndian", "BigEndian").replace("WidthBE", "WidthBE")),
-    ('<Integer Name="Width"><pValue>WidthSigned</pValue></Integer>',
-     int_reg("WidthSigned", 0x2000).replace("Unsigned", "Signed")),
-    ('<Integer Name="Width"><pValue>WidthOdd</pValue></Integer>', int_reg("WidthOdd", 0x2000, length=2)),
-    ('<Integer Name="Width"><pValue>WidthP</pValue></Integer>',
-     int_reg("WidthP", 0x2000, extra="<pAddress>Base</pAddress>")),
-])
-def test_unsupported_nodes_name_the_feature(width_node: str, extra: str) -> None:
-    with pytest.raises(ProtocolError, match="Width"):
-        parse_genicam(build_xml(width_node, extra), DEV)
-
-
-@pytest.mark.parametrize("data", [
-    b"<RegisterDescription",  # not well-formed
-    b'<?xml version="1.0"?><!DOCTYPE x [<!ENTITY a "b">]><RegisterDescription/>',
-    b'<Other xmlns="http://www.genicam.org/GenApi/Version_1_1"/>',
-    b'<RegisterDescription xmlns="urn:something-else"/>',
-])
-def test_bad_documents(data: bytes) -> None:
-    with pytest.raises(ProtocolError):
-        parse_genicam(data, DEV)
-
-
-def test_zip_must_hold_exactly_one_xml() -> None:
-    with pytest.raises(ProtocolError, match="exactly one"):
-        parse_genicam(zipped(build_xml(), ("a.xml", "b.xml")), DEV, zipped=True)
-    with pytest.raises(ProtocolError):
-        parse_genicam(b"PK\x03\x04 broken", DEV)
 
 
 # ------------------------------------------------------------------------------------ stream
@@ -400,14 +305,6 @@ def test_fuzz_byte_parsers(data: bytes) -> None:
         only_protocol_errors(lambda: parser(data, DEV))  # noqa: B023 - called at once
 
 
-@fuzz_settings(200)
-@given(data=st.one_of(st.binary(max_size=400), st.text(max_size=300).map(str.encode),
-                      st.binary(max_size=200).map(lambda b: b"PK\x03\x04" + b)))
-def test_fuzz_genicam(data: bytes) -> None:
-    only_protocol_errors(lambda: parse_genicam(data, DEV))
-    only_protocol_errors(lambda: parse_genicam(data, DEV, zipped=True))
-
-
 @fuzz_settings(100)
 @given(header=st.binary(min_size=52, max_size=52), payload=st.binary(max_size=300))
 def test_fuzz_decode_pixels(header: bytes, payload: bytes) -> None:
@@ -429,16 +326,3 @@ def test_fuzz_assembler(transfers: list[bytes]) -> None:
         assert outcome is None or isinstance(outcome, (AssembledBlock, DiscardedBlock))
         assert assembler.next_read_size() >= 52
 
-
-def test_sfnc_strings_and_optional_features() -> None:
-    extra = ('<StringReg Name="DeviceVendorName"><Address>0x4</Address><Length>64</Length><AccessMode>RO'
-             '</AccessMode><pPort>Device</pPort></StringReg>'
-             '<IntSwissKnife Name="PayloadSize"><Formula>1</Formula></IntSwissKnife>'  # outside the subset
-             '<StringReg Name="DeviceUserID"><Address>0x184</Address><Length>99999</Length></StringReg>')
-    features = parse_genicam(build_xml(extra=extra), DEV)
-    vendor = features.require("DeviceVendorName", DEV)
-    assert (vendor.kind, vendor.register.address, vendor.register.length, vendor.register.access) == (
-        "string", 0x4, 64, "RO")
-    # optional features outside the subset are left out instead of failing the open
-    assert "PayloadSize" not in features and "DeviceUserID" not in features
-    assert "Width" in features

@@ -2,7 +2,7 @@
 
 What is parsed, host side: GenCP acknowledges (:mod:`~wavestack.drivers.u3v.gencp`), the bootstrap
 registers and manifest (:mod:`~wavestack.drivers.u3v.bootstrap`), the GenICam XML
-(:mod:`~wavestack.drivers.u3v.genicam`), stream leaders, trailers and payloads
+stream leaders, trailers and payloads
 (:mod:`~wavestack.drivers.u3v.image_block`, :mod:`~wavestack.drivers.u3v.stream`). Device side: the
 simulator's GenCP command parser (:mod:`wavestack.simulators.u3v.gencp_device`) over its register
 space. Each must return a value or raise :class:`ProtocolError`; the two sides, written apart on
@@ -10,6 +10,8 @@ purpose, must understand each other.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import hashlib
 import math
@@ -26,7 +28,7 @@ from camera_hooks import AcceptingHooks
 from wavestack.drivers.errors import ProtocolError
 from wavestack.drivers.u3v import bootstrap as bs
 from wavestack.drivers.u3v import gencp
-from wavestack.drivers.u3v.genicam import WANTED_FEATURES, parse_genicam
+from wavestack.drivers.genicam import NodeMap
 from wavestack.drivers.u3v.stream import (AssembledBlock, BlockAssembler, DiscardedBlock, Leader, check_block,
                                           decode_pixels, parse_leader, parse_trailer)
 from wavestack.simulators.u3v import gencp_device as sim_gencp
@@ -224,6 +226,14 @@ def test_a_sirm_with_an_absurd_alignment_is_refused() -> None:
         bs.decode_sirm(struct.pack("<IIQII", 0xFF << 24, 0, 4096, 52, 32) + bytes(24), DEVICE)
 
 
+class _RegisterPort:
+    def __init__(self, read: Callable[[int, int], bytes]) -> None:
+        self.read = read
+
+    def write(self, address: int, data: bytes) -> None:
+        raise AssertionError("nothing is written here")
+
+
 printable = st.text(st.characters(min_codepoint=33, max_codepoint=126), min_size=1, max_size=64)
 
 
@@ -246,92 +256,13 @@ def test_the_simulators_bootstrap_manifest_and_xml_decode_in_the_driver(manufact
     entry = bs.decode_manifest_entry(read(abrm.manifest_table_address + 8, 64), DEVICE)
     file = read(entry.address, entry.size)
     assert hashlib.sha1(file).digest() == entry.sha1 and entry.file_format == int(zipped)
-    features = parse_genicam(file, DEVICE, zipped=bool(entry.file_format))
+    node_map = NodeMap.from_xml(file, device=DEVICE, zipped=bool(entry.file_format))
+    node_map.attach(_RegisterPort(read))
     for spec in FEATURES:
-        feature = features.require(spec.name, DEVICE)
-        assert (feature.register.address, feature.register.length, feature.register.access) == (
-            spec.address, spec.length, spec.access)
-        if spec.kind == "Enumeration":
-            assert dict(feature.entries) == dict(spec.entries)
-
-
-# ------------------------------------------------------------------------------------- GenICam XML
-SIM_XML = genicam_xml(IDENTITY)
-SIM_ZIP = manifest_file(SIM_XML, True)[0]
-
-
-@fuzz_settings(200)
-@given(document=st.one_of(_mutations(SIM_XML), _mutations(SIM_ZIP), st.binary(max_size=200)))
-def test_genicam_parser_returns_or_raises_protocol_error(document: bytes) -> None:
-    try:
-        features = parse_genicam(document, DEVICE)
-    except ProtocolError:
-        return
-    for feature in features.features.values():
-        assert feature.minimum is None or math.isfinite(feature.minimum)
-        assert feature.maximum is None or math.isfinite(feature.maximum)
-        if feature.kind != "string":
-            assert all(0 <= v < 1 << (8 * feature.register.length) for v in feature.entries.values())
-        if feature.command_value is not None:
-            assert 0 <= feature.command_value < 1 << (8 * feature.register.length)
-
-
-def _with_width(node: str) -> bytes:
-    return (b'<RegisterDescription xmlns="http://www.genicam.org/GenApi/Version_1_1">' + node.encode()
-            + b'<IntReg Name="WidthReg"><Address>0x10</Address><Length>4</Length><AccessMode>RW</AccessMode>'
-              b'</IntReg></RegisterDescription>')
-
-
-number_texts = st.one_of(st.floats().map(repr), st.integers(-2**70, 2**70).map(str),
-                         st.integers(0, 2**70).map(hex), st.text(max_size=8).map(lambda t: t.replace("<", "")))
-
-
-@fuzz_settings(300)
-@given(low=number_texts, high=number_texts, command=number_texts, kind=st.sampled_from(["Integer", "Float"]))
-def test_numbers_in_the_xml_give_usable_features_or_protocol_error(low: str, high: str, command: str,
-                                                                   kind: str) -> None:
-    register = "FloatReg" if kind == "Float" else "IntReg"
-    doc = (f'<RegisterDescription><{kind} Name="Width"><pValue>R</pValue><Min>{low}</Min><Max>{high}</Max></{kind}>'
-           f'<Command Name="TriggerSoftware"><pValue>C</pValue><CommandValue>{command}</CommandValue></Command>'
-           f'<{register} Name="R"><Address>0</Address><Length>4</Length></{register}>'
-           f'<IntReg Name="C"><Address>8</Address><Length>4</Length></IntReg></RegisterDescription>')
-    try:
-        features = parse_genicam(doc.replace("&", "").encode("utf-8", "replace"), DEVICE)
-    except ProtocolError:
-        return
-    width, trigger = features.features["Width"], features.features["TriggerSoftware"]
-    assert width.minimum is not None and width.maximum is not None
-    assert math.isfinite(width.minimum) and math.isfinite(width.maximum) and width.minimum <= width.maximum
-    assert trigger.command_value is not None and 0 <= trigger.command_value < 2**32
-
-
-@pytest.mark.parametrize(("node", "message"), [
-    ('<Integer Name="Width"><pValue>WidthReg</pValue><Min>nan</Min></Integer>', "Min"),
-    ('<Integer Name="Width"><pValue>WidthReg</pValue><Max>inf</Max></Integer>', "Max"),
-    ('<Integer Name="Width"><pValue>WidthReg</pValue><Min>10</Min><Max>5</Max></Integer>', "Min"),
-    ('<Command Name="Width"><pValue>WidthReg</pValue><CommandValue>-1</CommandValue></Command>', "CommandValue"),
-    ('<Command Name="Width"><pValue>WidthReg</pValue><CommandValue>0x100000000</CommandValue></Command>',
-     "CommandValue"),
-    ('<Enumeration Name="Width"><EnumEntry Name="A"><Value>4294967296</Value></EnumEntry>'
-     '<pValue>WidthReg</pValue></Enumeration>', "Value"),
-])
-def test_values_the_register_cannot_hold_or_limits_that_are_no_limits_are_refused(node: str, message: str) -> None:
-    # regressions: a NaN Min switched the driver's exposure limit check off (NaN compares false);
-    # a CommandValue or an entry beyond the register width surfaced later as ValueError from the
-    # driver's write, not as a ProtocolError naming the XML
-    with pytest.raises(ProtocolError, match=message):
-        parse_genicam(_with_width(node), DEVICE)
-
-
-@pytest.mark.parametrize(("bom", "codec"), [(b"", "utf-16"), (b"\xff\xfe", "utf-16-le"), (b"\xfe\xff", "utf-16-be")])
-@pytest.mark.parametrize("declaration", ['<?xml version="1.0" encoding="UTF-16"?>', ""])
-def test_a_dtd_is_refused_in_any_encoding(bom: bytes, codec: str, declaration: str) -> None:
-    # regression: the DTD check looked for the ASCII bytes b"<!DOCTYPE", so a UTF-16 document with
-    # entity declarations was parsed (and its entities expanded)
-    doc = (declaration + '<!DOCTYPE r [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;">]>'
-           '<RegisterDescription><IntReg Name="&b;"/></RegisterDescription>')
-    with pytest.raises(ProtocolError, match="DTD"):
-        parse_genicam(bom + doc.encode(codec), DEVICE)
+        assert spec.name in node_map
+        info = node_map.info(spec.name)
+        assert info.kind == {"Integer": "integer", "Float": "float", "Enumeration": "enumeration",
+                             "Command": "command"}[spec.kind]
 
 
 # ------------------------------------------------------------------------------------ image stream
