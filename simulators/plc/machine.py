@@ -33,6 +33,7 @@ import logging
 import math
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,6 +51,8 @@ __all__ = ["MachineSimSettings", "MachineSnapshot", "PolishingMachine", "Removal
 
 _log = logging.getLogger(__name__)
 
+#: Jobs whose executed dwell the machine keeps for tests (the newest; a long run must not grow without bound).
+EXECUTED_HISTORY = 64
 _SLICE_REAL_S = 0.01  # longest real time between two interlock checks within a dwell
 
 _BYTES_PER_POINT = 120  # a generous bound on one point's line in the job file
@@ -183,7 +186,7 @@ class PolishingMachine:
         self._announced: tuple[int, int, int, float] | None = None
         self._run: _Run | None = None
         self._used: set[int] = set()
-        self._executed: dict[int, NDArray[np.float64]] = {}
+        self._executed: OrderedDict[int, NDArray[np.float64]] = OrderedDict()  # the newest EXECUTED_HISTORY jobs
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
         self._halt_reason = StopReason.NONE
@@ -213,7 +216,10 @@ class PolishingMachine:
             return self._refusal
 
     def executed_dwell_s(self, job_id: int) -> NDArray[np.float64]:
-        """Dwell actually executed per point of a run job, s, shape (K,) (zeros where it never got)."""
+        """Dwell actually executed per point of a run job, s, shape (K,) (zeros where it never got).
+
+        Kept for the newest :data:`EXECUTED_HISTORY` jobs run; KeyError for any other id.
+        """
         with self._lock:
             return self._executed[job_id].copy()
 
@@ -296,6 +302,8 @@ class PolishingMachine:
             self._halt_reason = StopReason.NONE
             run = self._run
             self._executed[job_id] = run.executed_s
+            while len(self._executed) > EXECUTED_HISTORY:  # bounded: a shift of jobs must not grow without end
+                self._executed.popitem(last=False)
             self._thread = threading.Thread(target=self._polish_safely, args=(run,), name=f"polishing-job-{job_id}",
                                             daemon=True)
             self._thread.start()

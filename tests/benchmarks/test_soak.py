@@ -20,6 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from soak_faults import FAULT_KINDS, make_schedule, select_kinds  # noqa: E402
+from soak_polish import _check_run  # noqa: E402
 from soak_observe import Window  # noqa: E402
 from soak_report import Sample, fault_problems, rss_verdict  # noqa: E402
 from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip  # noqa: E402
@@ -203,3 +204,34 @@ def test_the_operator_rearms_a_fail_safe_trip_and_the_same_station_sends_command
     assert rearms and rearms[-1]["status"] == "ok" and rearms[-1]["accepted_after"] >= 1, rearms
     assert report["run"]["restarts"] == 0 and report["run"]["crashes"] == 0
     assert not faults[-1]["watchdog_tripped_at_end"] and report["unhandled_exceptions"] == 0
+
+
+class _Machine:
+    """The machine's record as the polish soak reads it: ids loaded, dwell executed per job."""
+
+    def __init__(self, executed: dict[int, "np.ndarray"]) -> None:
+        self.used_job_ids, self._executed = frozenset(executed), executed
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        return True
+
+    def executed_dwell_s(self, job_id: int) -> "np.ndarray":
+        return self._executed[job_id]
+
+
+def test_the_polish_soak_sees_a_job_applied_twice_or_lost(tmp_path: Path) -> None:
+    import numpy as np
+
+    from wavestack.drivers.plc import JobFile, write_job_file
+    from wavestack.polish import run_started
+
+    dwell = np.array([1.0, 2.0, 0.5])
+    write_job_file(tmp_path, JobFile(7, np.zeros(3), np.zeros(3), dwell, np.full(3, 10.0), 0.1, {}, {}))
+    row = replace(run_started(1, 7, rms_before_nm=1.0, pv_before_nm=1.0, noise_before_nm=0.1, predicted_rms_nm=0.5,
+                              predicted_pv_nm=0.5, total_dwell_s=3.5, points=3, job_crc32=0, started_unix_s=0.0,
+                              solve_s=0.0, floor_nm=0.0), machine_state="DONE", points_done=3)
+    assert _check_run(row, _Machine({7: dwell.copy()}), tmp_path) == []
+    twice = _check_run(row, _Machine({7: dwell * 2}), tmp_path)  # every point dwelt on twice
+    assert twice and "more dwell than the file asked" in twice[0]
+    assert "never loaded" in _check_run(row, _Machine({}), tmp_path)[0]
+    assert "gone from the job folder" in _check_run(replace(row, job_id=8), _Machine({8: dwell}), tmp_path)[0]
