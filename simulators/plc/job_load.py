@@ -17,7 +17,7 @@ from __future__ import annotations
 import multiprocessing
 import multiprocessing.connection
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,10 +25,19 @@ from numpy.typing import NDArray
 from wavestack.simulators.plc.job_file import JobFileRefused, MachineJob, read_job_file
 from wavestack.simulators.plc.job_state import StopReason
 
-if TYPE_CHECKING:
-    from wavestack.simulators.plc.machine import MachineSimSettings
+__all__ = ["CHILD_TIMEOUT_S", "IN_THREAD_BYTES", "MachineLimits", "check_job", "read_announced_job"]
 
-__all__ = ["CHILD_TIMEOUT_S", "IN_THREAD_BYTES", "check_job", "read_announced_job"]
+
+class MachineLimits(Protocol):
+    """The machine's own limits a job is checked against (``MachineSimSettings`` has them)."""
+
+    max_points: int
+    max_total_dwell_s: float
+    max_dwell_per_point_s: float
+    max_feed_mm_s: float
+    travel_x_mm: tuple[float, float]
+    travel_y_mm: tuple[float, float]
+
 
 #: Largest job file parsed on the calling (loader) thread itself: about 25,000 points, < 0.1 s.
 IN_THREAD_BYTES = 1 << 20
@@ -88,7 +97,7 @@ def _parse_in_child(path: Path, max_bytes: int, key: bytes | None,
         sender.close()
 
 
-def check_job(job: MachineJob, announced: tuple[int, int, int, float], settings: MachineSimSettings) -> None:
+def check_job(job: MachineJob, announced: tuple[int, int, int, float], settings: MachineLimits) -> None:
     """Refuse ``job`` unless it is what was announced (id, CRC-32, count, total dwell) and within the limits.
 
     Raises

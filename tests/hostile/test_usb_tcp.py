@@ -24,7 +24,7 @@ import pytest
 
 from wavestack.cli import EXIT_DEVICE_ERROR, main
 from wavestack.drivers import DeviceError
-from wavestack.drivers.u3v import U3VCamera
+from wavestack.drivers.u3v import U3VCamera, U3VCounters
 from wavestack.drivers.usb_tcp import UsbTcpBackend
 from wavestack.simulators.u3v import SimulatedU3VCamera, SimulatedUsbBackend, U3VSimSettings
 from wavestack.simulators.usb_tcp import UsbTcpServer
@@ -38,10 +38,13 @@ def ramp(block_id: int, device_time_ns: int, exposure_us: float) -> tuple[np.nda
     return (np.arange(HEIGHT * WIDTH, dtype=np.uint16).reshape(HEIGHT, WIDTH) + block_id) % 4096, None
 
 
-def _camera_bus() -> SimulatedUsbBackend:
-    return SimulatedUsbBackend([SimulatedU3VCamera(U3VSimSettings(serial="SIM-TCP", width=WIDTH, height=HEIGHT,
-                                                                  frame_rate_hz=200.0, pixel_format="Mono12"),
-                                                   ramp)])
+def _sim_camera() -> SimulatedU3VCamera:
+    return SimulatedU3VCamera(U3VSimSettings(serial="SIM-TCP", width=WIDTH, height=HEIGHT, frame_rate_hz=200.0,
+                                             pixel_format="Mono12"), ramp)
+
+
+def _camera_bus(sim: SimulatedU3VCamera | None = None) -> SimulatedUsbBackend:
+    return SimulatedUsbBackend([sim if sim is not None else _sim_camera()])
 
 
 class RawClient:
@@ -83,25 +86,40 @@ class RawClient:
     def close(self) -> None:
         self.sock.close()
 
+    def __enter__(self) -> RawClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
 
 def test_a_second_client_cannot_steal_frames_or_close_the_station_handles() -> None:
-    with UsbTcpServer(_camera_bus()) as server:
+    sim = _sim_camera()
+    with UsbTcpServer(_camera_bus(sim)) as server:
         backend = UsbTcpBackend("127.0.0.1", server.port)
         with U3VCamera.open(backend=backend, serial="SIM-TCP", timeout_s=TIMEOUT_S) as camera:
             camera.start()
             first = camera.read_frame(timeout_s=TIMEOUT_S).frame_id
-            intruder = RawClient(server.port)
-            assert "value" in intruder.call("hello", session=None)[0]
-            answers = [intruder.call(op, handle=ref, ep=0x81, intf=1, size=1 << 16, timeout=100)[0]
-                       for ref in range(1, 40) for op in ("bulk_read", "close_device")]
-            # the station's handles are not the intruder's: every one is closed for it, nothing was read
-            assert all(a.get("usb_error", [None, None, None])[2] == 19 or a == {"value": None} for a in answers)
-            assert not any(isinstance(a.get("value"), int) and a["value"] > 0 for a in answers)
-            ids = [camera.read_frame(timeout_s=TIMEOUT_S).frame_id for _ in range(5)]
-            assert ids == list(range(ids[0], ids[0] + 5)) and ids[0] > first  # no frame went missing
-            intruder.close()
+            with RawClient(server.port) as intruder:
+                assert "value" in intruder.call("hello", session=None)[0]
+                answers = [intruder.call(op, handle=ref, ep=0x81, intf=1, size=1 << 16, timeout=100)[0]
+                           for ref in range(1, 40) for op in ("bulk_read", "close_device")]
+                # the station's handles are not the intruder's: every one is closed for it, nothing was read
+                assert all(a.get("usb_error", [None, None, None])[2] == 19 or a == {"value": None} for a in answers)
+                assert not any(isinstance(a.get("value"), int) and a["value"] > 0 for a in answers)
+                ids = [camera.read_frame(timeout_s=TIMEOUT_S).frame_id for _ in range(5)]
+                assert first < ids[0] < ids[-1]
+                # every block the camera began reached the station whole (one may be in flight), none was cut
+                before, sent, after = camera.counters(), sim.counters.blocks_sent, camera.counters()
+                assert _blocks_seen(before) <= sent <= _blocks_seen(after) + 1
+                assert after.discarded_blocks == after.transfer_errors == 0
             camera.stop()
         backend.close()
+
+
+def _blocks_seen(counters: U3VCounters) -> int:
+    """Blocks that reached the driver: frames acquired less the ones only inferred from a gap in ids."""
+    return counters.acquired - counters.dropped_in_gaps + counters.discarded_blocks
 
 
 def test_a_second_session_may_look_but_not_claim_an_owned_camera() -> None:
@@ -225,8 +243,8 @@ def _silent(conn: socket.socket, stop_after_s: float = 8.0) -> None:
             continue
 
 
-def _answers(replies: dict[str, object]) -> Callable[[socket.socket], None]:
-    """A server that answers each operation with ``replies[op]`` (hello with a session)."""
+def _answers(replies: dict[str, object], payload: bytes = b"") -> Callable[[socket.socket], None]:
+    """A server that answers each operation with ``replies[op]`` and ``payload`` (hello with a session)."""
     def answer(conn: socket.socket) -> None:
         buffer, deadline = b"", time.monotonic() + 8.0
         while time.monotonic() < deadline:
@@ -244,8 +262,8 @@ def _answers(replies: dict[str, object]) -> Callable[[socket.socket], None]:
                 op = json.loads(buffer[8:8 + size])["op"]
                 buffer = buffer[8 + size + data_size:]
                 reply = {"value": "s" * 32} if op == "hello" else replies.get(op, {"value": None})
-                body = json.dumps(reply).encode()
-                conn.sendall(HEAD.pack(len(body), 0) + body)
+                body, data = json.dumps(reply).encode(), b"" if op == "hello" else payload
+                conn.sendall(HEAD.pack(len(body), len(data)) + body + data)
     return answer
 
 
@@ -273,26 +291,9 @@ def test_a_read_answered_with_more_than_it_asked_is_an_io_error() -> None:
 
     import usb.core
 
-    def answer(conn: socket.socket) -> None:
-        replies = iter([{"value": "s" * 32}, {"value": 8}])
-        buffer, deadline = b"", time.monotonic() + 5.0
-        while time.monotonic() < deadline:
-            try:
-                chunk = conn.recv(4096)
-            except TimeoutError:
-                continue
-            if not chunk:
-                return
-            buffer += chunk
-            size, data_size = HEAD.unpack(buffer[:8])
-            if len(buffer) >= 8 + size + data_size:
-                buffer = buffer[8 + size + data_size:]
-                body = json.dumps(next(replies)).encode()
-                conn.sendall(HEAD.pack(len(body), 8) + body + b"x" * 8)
-
-    with fake_server(answer) as port:
+    with fake_server(_answers({"bulk_read": {"value": 8}}, payload=b"x" * 8)) as port:
         backend = UsbTcpBackend("127.0.0.1", port, io_timeout_s=0.5)
-        with pytest.raises(usb.core.USBError) as raised:
+        with pytest.raises(usb.core.USBError) as raised:  # 4 bytes asked for, 8 sent
             backend.bulk_read(1, 0x81, 1, array.array("B", bytes(4)), 100)
         assert raised.value.errno == errnos.EIO
         backend.close()
