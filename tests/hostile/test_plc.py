@@ -226,3 +226,26 @@ def _open_for_writing(path: Path) -> None:
     except OSError:  # nobody reads it (the new reader never opened it for long): nothing to unblock
         return
     os.close(descriptor)
+
+
+def test_silent_strangers_cannot_fill_the_plc_but_busy_ones_keep_their_places(tmp_path: Path) -> None:
+    machine = PolishingMachine(MachineSimSettings(tmp_path))
+    with PlcSimulator(layout(60.0), PolishingStation((0.0,) * 4), machine=machine, max_connections=3,
+                      quiet_s=1.0) as sim:
+        with stranger(sim) as one, stranger(sim) as two, stranger(sim) as three:
+            for peer in (one, two, three):  # three busy peers fill the cap: a fourth is closed on arrival
+                assert not peer.read_holding_registers(20, count=1, device_id=1).isError()
+            with stranger(sim):
+                assert wait_for(lambda: sim.connections_refused == 1)
+            time.sleep(1.2)  # now all three are quiet: the station's link takes the place of the quietest
+            with PolishingLink("127.0.0.1", sim.port, register_map(), TIMING, job_limits=LIMITS) as link:
+                link.connect(timeout_s=2.0)
+                assert link.heartbeat(timeout_s=1.0).ready
+                owner = sim.program.owner_connection
+                time.sleep(1.2)  # the station is the quiet one now, but it owns the PLC: it keeps its place
+                for peer in (two, three):
+                    assert not peer.read_holding_registers(20, count=1, device_id=1).isError()
+                with stranger(sim):
+                    assert wait_for(lambda: sim.connections_refused == 2)
+                assert link.heartbeat(timeout_s=1.0).ready
+                assert sim.program.owner_connection == owner is not None  # the same connection
