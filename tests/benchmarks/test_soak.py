@@ -10,7 +10,9 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
+from types import SimpleNamespace
 
 from dataclasses import replace
 
@@ -21,7 +23,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from soak_faults import FAULT_KINDS, make_schedule, select_kinds  # noqa: E402
 from soak_polish import _check_run  # noqa: E402
-from soak_observe import Window  # noqa: E402
+from soak_observe import Observer, Window, device_snapshot  # noqa: E402
 from soak_report import Sample, fault_problems, rss_verdict  # noqa: E402
 from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip  # noqa: E402
 
@@ -150,8 +152,32 @@ def test_a_command_sent_while_the_plc_is_not_scanning_is_unsafe() -> None:
     estop = Window(6, "plc_estop", 10.0, clear_t_s=13.0, end_t_s=20.0)
     estop.results = estop.valid = 20
     estop.first_valid_after_clear_s = 0.1
-    estop.counts.update(estop_seen=5, sent_while_active=1)
-    assert fault_problems(estop) == ["UNSAFE: 1 commands sent while the e-stop was pressed"]
+    estop.counts.update(estop_seen=5, sent_while_active=1)  # accepted before the e-stop, its result after
+    assert fault_problems(estop) == []
+    estop.counts["commanded_after_estop_seen"] = 1  # tried after a result had shown the e-stop
+    assert fault_problems(estop) == ["UNSAFE: 1 commands sent while the e-stop was pressed and seen"]
+
+
+def _record(*, sent: bool, estop: bool, refused: bool = False) -> SimpleNamespace:
+    """A station record as the observer reads it: a command sent or refused, the e-stop bit of the status."""
+    command = SimpleNamespace(sent=sent, reason="PLC: refused (4)" if refused else None,
+                              status="READY|NOT_SENT" if refused else "READY")
+    output = SimpleNamespace(heartbeat=SimpleNamespace(ok=True, watchdog_tripped=False, estop=estop), command=command)
+    result = SimpleNamespace(valid=True, reason=None, output=output, counters=SimpleNamespace(
+        frames=SimpleNamespace(acquired=0)))
+    return SimpleNamespace(result=result)
+
+
+def test_a_command_tried_once_the_station_has_seen_the_e_stop_is_counted_and_one_accepted_before_is_not() -> None:
+    observer = Observer(time.monotonic())
+    snapshot = device_snapshot(None)
+    window = observer.open_window(Window(0, "plc_estop", observer.now(), clear_t_s=observer.now() + 60.0), snapshot, 0)
+    observer.add(_record(sent=True, estop=False))  # accepted just before the e-stop, its result after
+    assert window.counts["commanded_after_estop_seen"] == 0 and window.counts["sent_while_active"] == 1
+    observer.add(_record(sent=False, estop=True))  # the station sees it and holds
+    observer.add(_record(sent=False, estop=False, refused=True))  # tried anyway: the PLC refused it
+    observer.add(_record(sent=True, estop=True))  # tried with the e-stop in its own status
+    assert window.counts["commanded_after_estop_seen"] == 2
 
 
 def _soak(*options: str, timeout_s: float = 240.0) -> dict:
