@@ -8,7 +8,10 @@ honouring split replies (pieces released at their times) and dropped connections
 the one controller (one error state, one platform), as on the real device. Sockets never block the
 loop: a reply goes out as far as the peer's buffer takes it and the rest waits for the socket to be
 writable, so a client that never reads stalls no one; one whose unsent replies pass
-``MAX_PENDING_BYTES`` is disconnected.
+``MAX_PENDING_BYTES`` is disconnected. At most ``max_clients`` connections are served at once: a
+newcomer at the cap takes the place of the longest-quiet client that has sent nothing for
+``quiet_s``, else it is closed on arrival (counted in :attr:`HexapodSimulator.refused`), so silent
+peers cannot lock the station out and busy ones keep their places.
 
 :meth:`HexapodSimulator.stop` wakes the loop, which closes every socket before the thread ends; the
 caller joins the thread, so nothing outlives the ``with`` block.
@@ -32,7 +35,7 @@ from wavestack.simulators.pi_gcs.framing import LineAssembler
 from wavestack.simulators.pi_gcs.pose import SimPose
 from wavestack.simulators.pi_gcs.settings import HexapodSimSettings
 
-__all__ = ["DEFAULT_GCS_PORT", "MAX_PENDING_BYTES", "HexapodSimulator"]
+__all__ = ["DEFAULT_GCS_PORT", "MAX_CLIENTS", "MAX_PENDING_BYTES", "QUIET_S", "HexapodSimulator"]
 
 _log = logging.getLogger(__name__)
 
@@ -42,6 +45,8 @@ _IDLE_S = 0.1  # longest sleep of the loop when nothing is due
 #: Unsent reply bytes a client may leave waiting before it is disconnected (a GCS reply is a few
 #: hundred bytes: a client this far behind does not read).
 MAX_PENDING_BYTES = 1 << 16
+#: Connections served at once, and how long a client must have been quiet to make room for a newcomer.
+MAX_CLIENTS, QUIET_S = 8, 30.0
 
 
 @dataclass
@@ -53,6 +58,7 @@ class _Client:
     last_due: float = 0.0
     blocked: bool = False  # the socket's buffer is full: wait until it is writable
     pending: int = 0  # bytes in the outbox
+    last_heard: float = field(default_factory=time.monotonic)  # when it last sent a byte
 
 
 class HexapodSimulator:
@@ -66,6 +72,8 @@ class HexapodSimulator:
         Where to listen; port 0 picks a free port (see :attr:`port`).
     clock
         Simulated-time clock, s (tests pass one they advance by hand).
+    max_clients, quiet_s
+        Connections served at once; how long one must have sent nothing to make room (module notes).
 
     Attributes
     ----------
@@ -85,7 +93,10 @@ class HexapodSimulator:
     """
 
     def __init__(self, settings: HexapodSimSettings | None = None, *, host: str = "127.0.0.1", port: int = 0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, max_clients: int = MAX_CLIENTS,
+                 quiet_s: float = QUIET_S) -> None:
+        self._max_clients, self._quiet_s = max_clients, quiet_s
+        self.refused = 0
         self.controller = GcsController(settings or HexapodSimSettings(), clock=clock)
         self.faults: GcsSimFaults = self.controller.faults
         self._host, self._port = host, port
@@ -225,6 +236,24 @@ class HexapodSimulator:
             self._clients[sock.fileno()] = client
             self.connections += 1
         selector.register(sock, selectors.EVENT_READ, client)
+        self._admit(selector, client)
+
+    def _admit(self, selector: selectors.BaseSelector, newcomer: _Client) -> None:
+        """Keep ``newcomer`` within the cap, making room from a quiet client, or close it (module notes)."""
+        others = [c for c in self._snapshot() if c is not newcomer]
+        if len(others) < self._max_clients:
+            return
+        now = time.monotonic()
+        quiet = [c for c in others if now - c.last_heard >= self._quiet_s]
+        if quiet:
+            oldest = min(quiet, key=lambda c: c.last_heard)
+            _log.warning("GCS simulator: %d clients; one quiet for %.0f s closed for a new one", len(others),
+                         now - oldest.last_heard)
+            self._close(selector, oldest)
+            return
+        _log.warning("GCS simulator: %d clients, none quiet: a new connection refused", len(others))
+        self.refused += 1
+        self._close(selector, newcomer)
 
     def _read(self, selector: selectors.BaseSelector, client: _Client) -> None:
         try:
@@ -236,7 +265,7 @@ class HexapodSimulator:
         if not data:
             self._close(selector, client)
             return
-        now = time.monotonic()
+        now = client.last_heard = time.monotonic()
         for event in client.assembler.feed(data):
             delivery = self.controller.handle(event)
             due = max(now, client.last_due)

@@ -87,3 +87,24 @@ def test_a_pivot_out_of_range_is_refused_by_the_driver_and_by_the_controller() -
             hexapod.set_pivot((0.0, 0.0, 50.0))
             assert hexapod.pivot() == (0.0, 0.0, 50.0)
     assert not any("nan" in line.lower() or "inf" in line.lower() for line in sim.controller.commands)
+
+
+def test_silent_gcs_clients_make_room_and_busy_ones_keep_their_places() -> None:
+    with HexapodSimulator(HexapodSimSettings(), max_clients=2, quiet_s=1.0) as sim:
+        silent = [socket.create_connection(("127.0.0.1", sim.port), timeout=5.0) for _ in range(2)]
+        try:
+            time.sleep(1.2)  # both quiet now: the station's controller link takes the place of the quieter
+            with PIHexapod(f"tcp://127.0.0.1:{sim.port}", limits=LIMITS, timeout_s=1.0) as hexapod:
+                hexapod.position()
+                assert silent[0].recv(16) == b""  # closed to make room
+                with socket.create_connection(("127.0.0.1", sim.port), timeout=5.0) as third:
+                    assert silent[1].recv(16) == b""  # the other quiet one made room for it
+                    hexapod.position()  # busy: the station keeps its place
+                    with socket.create_connection(("127.0.0.1", sim.port), timeout=5.0) as fourth:
+                        assert fourth.recv(16) == b"" and sim.refused == 1  # nobody quiet: refused
+                    third.sendall(b"CSV?\n")
+                    assert third.recv(16) == b"2.0\n"
+                hexapod.position()
+        finally:
+            for sock in silent:
+                sock.close()
