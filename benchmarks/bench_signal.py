@@ -28,7 +28,8 @@ from wavestack.pipeline import detect_aperture, mode_list  # noqa: E402
 from wavestack.pipeline import ApertureWatch  # noqa: E402
 from wavestack.pipeline import carrier_phase  # noqa: E402
 from wavestack.pipeline import four_step, hariharan_five_step  # noqa: E402
-from wavestack.pipeline import Centroider, LensletGrid, slopes  # noqa: E402
+from wavestack.pipeline import Centroider, LensletLattice, slopes  # noqa: E402
+from wavestack.pipeline.instrument import ShackHartmannProcessor, ShackHartmannSetup  # noqa: E402
 from wavestack.pipeline import ModalReconstructor  # noqa: E402
 from wavestack.pipeline import TemporalUnwrapper, unwrap_spatial  # noqa: E402
 
@@ -61,10 +62,10 @@ def frames_for(phase: np.ndarray, mask: np.ndarray, steps: np.ndarray) -> np.nda
     return np.clip(stack, 0, 255).astype(np.uint8)
 
 
-def spot_frame(grid: LensletGrid, shift: np.ndarray) -> np.ndarray:
+def spot_frame(grid: LensletLattice, shift: np.ndarray) -> np.ndarray:
     rows, cols = np.indices((1024, 1280), dtype=np.float32)
     frame = np.zeros((1024, 1280), np.float32)
-    centres = grid.centres().reshape(-1, 2) + shift
+    centres = grid.centres() + shift
     for cx, cy in centres:
         r0, c0 = int(cy) - 6, int(cx) - 6
         window = (slice(max(r0, 0), r0 + 13), slice(max(c0, 0), c0 + 13))
@@ -107,7 +108,7 @@ def main() -> int:
     counter = iter(range(10**9))
     row("temporal unwrap (steady state)", lambda: unwrapper.update(drift[next(counter) % 4], mask), [wrapped])
 
-    grid = LensletGrid(pitch_px=25.0, offset_px=(140.0, 12.0), shape=(40, 40))
+    grid = LensletLattice.array("square", 25.0, (40, 40), first_centre_px=(152.5, 24.5))
     reference_frame = spot_frame(grid, np.zeros(2))
     measured_frame = spot_frame(grid, np.array([0.7, -0.4]))
     centroider = Centroider.build(grid, reference_frame.shape)
@@ -122,6 +123,19 @@ def main() -> int:
         reconstructor.reconstruct(result.slopes_x, result.slopes_y)
 
     row("SH 40x40 centroids + 15-mode reconstruction", sh_frame, [measured_frame])
+    # the station's processor (centroids, lit rule, slopes, cached 36-mode reconstructor) on a square
+    # 40 x 40 array and on a hexagonal one of 46 rows of 40 (the same area): the hexagonal windows
+    # are gathered one per lenslet
+    for kind, shape in (("square", (40, 40)), ("hexagonal", (46, 40))):
+        array = LensletLattice.array(kind, 25.0, shape, first_centre_px=(152.5, 24.5))
+        setup = ShackHartmannSetup(focal_length_um=5000.0, pixel_um=5.5, wavelength_nm=632.8, lattice=kind,
+                                   pitch_px=25.0, offset_px=(140.0, 12.0), grid_shape=shape,
+                                   pupil_px=(640.0, 512.0, 480.0), min_intensity=1000.0)
+        spots = spot_frame(array, np.array([0.7, -0.4]))
+        processor = ShackHartmannProcessor(setup, reference_frame=spot_frame(array, np.zeros(2)))
+        assert processor.process([spots]).valid
+        row(f"SH processor, {kind} {shape[0]}x{shape[1]} (36 modes)", lambda p=processor, f=spots: p.process([f]),
+            [spots])
 
     print(f"# bench_signal: {SIZE}x{SIZE} (SH 1280x1024), 1 thread, {n} runs, medians (p99) in ms")
     print()

@@ -10,9 +10,13 @@ face, stacked so that a lower topic never imports a higher one:
 * then :mod:`~wavestack.pipeline.phase` (PSI, carrier, unwrapping, the measured wavefront, units);
 * then :mod:`~wavestack.pipeline.mapping` (meshes, Laplacians, CSF, QCM and conformal maps);
 * then :mod:`~wavestack.pipeline.fit` (methods, building, the fitter, its store) and
-  :mod:`~wavestack.pipeline.shack_hartmann` (grid, centroids, slopes, reconstruction);
+  :mod:`~wavestack.pipeline.shack_hartmann` (the lenslet lattice, centroids, slopes, reconstruction);
+* on top, :mod:`~wavestack.pipeline.instrument` (one processor per instrument kind, the signal
+  path every command calls: ``process(frames) -> outcome``);
 * beside them, needing nothing but the root: :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
-  dwell grid and surface extension, dwell-time solvers).
+  dwell grid and surface extension, dwell-time solvers);
+* on top: :mod:`~wavestack.pipeline.surface` (ISO form figures and tolerances, PVr, PSD, slope,
+  areal filters: the figures a drawing tolerances).
 
 Private pieces shared across topics live at this root (``_angles``, ``_checks``).
 """
@@ -101,11 +105,36 @@ from .polishing import (
 )
 from .shack_hartmann import (
     Centroider,
-    LensletGrid,
+    LensletLattice,
     ModalReconstructor,
     SpotMeasurement,
     convert_slopes,
+    detect_lattice,
+    lit_lenslets,
     slopes,
+)
+from .instrument import (
+    LensletSlopes,
+    ShackHartmannProcessor,
+    ShackHartmannSetup,
+    SlopeOutcome,
+)
+from .surface import (
+    ArealFilter,
+    FormAnalyzer,
+    FormFigures,
+    FormTolerance,
+    RobustPVAnalyzer,
+    SurfaceAnalyzer,
+    SurfaceFigures,
+    SurfaceRequest,
+    ToleranceError,
+    filter_surface,
+    measured_area,
+    parse_areal_filter,
+    parse_form_tolerance,
+    slope_maps,
+    surface_psd,
 )
 from .zernike import (
     ConicTest,
@@ -140,7 +169,7 @@ __all__ = [
     "mapped_columns",
     "build_canonical_map",
     "Centroider",
-    "LensletGrid",
+    "LensletLattice",
     "SpotMeasurement",
     "convert_slopes",
     "slopes",
@@ -242,4 +271,25 @@ __all__ = [
     "residual_after",
     "solve_dwell_fft",
     "solve_dwell_lsq",
+    "detect_lattice",
+    "lit_lenslets",
+    "LensletSlopes",
+    "ShackHartmannProcessor",
+    "ShackHartmannSetup",
+    "SlopeOutcome",
+    "ArealFilter",
+    "FormAnalyzer",
+    "FormFigures",
+    "FormTolerance",
+    "RobustPVAnalyzer",
+    "SurfaceAnalyzer",
+    "SurfaceFigures",
+    "SurfaceRequest",
+    "ToleranceError",
+    "filter_surface",
+    "measured_area",
+    "parse_areal_filter",
+    "parse_form_tolerance",
+    "slope_maps",
+    "surface_psd",
 ]

@@ -1,17 +1,27 @@
 """Shack-Hartmann spot frames of the simulated test optic, with the true spot displacements.
 
 A :class:`SpotRenderer` images the wavefront of a :class:`~wavestack.simulators.optic.TestOptic`
-through a square lenslet array onto a camera and returns each frame with its ground truth
-(:class:`SpotTruth`).
+through a square or hexagonal lenslet array onto a camera and returns each frame with its ground
+truth (:class:`SpotTruth`).
 
 Conventions (those of :mod:`wavestack.pipeline.shack_hartmann`: centroids, slopes and
 reconstruction)
 ----------------------------------------------------------------------------------------------
 * Pixel ``(row, col)`` has its centre at ``(col, row)``; positions are ``(col, row)`` pairs;
   physical coordinates are ``x = col``, ``y = -row`` (x right, y up).
-* Lenslet ``(i, j)`` covers columns ``offset[0] + [j, j + 1) pitch`` and rows
-  ``offset[1] + [i, i + 1) pitch``, its centre in the middle; lenslets are numbered row-major,
-  ``k = i * cols + j``: the grid is ``LensletGrid(pitch_px, offset_px, renderer.grid_shape)``.
+* The array has ``rows x cols`` lenslets numbered row-major, ``k = i * cols + j``. Lenslet
+  ``(0, 0)`` is centred at ``offset + pitch / 2`` along both axes; row ``i`` runs along the unit
+  vector ``r = (cos t, sin t)`` (``t = orientation_deg``, ``(d_col, d_row)``), and rows are
+  stacked along ``s = (-sin t, cos t)``: lenslet ``(i, j)`` is centred at
+  ``first + pitch (j + h_i) r + q i s`` with ``h_i = 0``, ``q = pitch`` for a square array and
+  ``h_i = (i mod 2) / 2``, ``q = pitch sqrt(3) / 2`` for a hexagonal one (odd rows shifted by
+  half a pitch). Its subaperture is its cell: the square of side ``pitch`` (turned with the
+  array), or the regular hexagon whose edges lie half a pitch from the centre across ``r`` and
+  the two directions 60 degrees from it. For an axis-aligned square array, lenslet ``(i, j)``
+  covers columns ``offset[0] + [j, j + 1) pitch`` and rows ``offset[1] + [i, i + 1) pitch``.
+  The pipeline's ``LensletLattice.array(kind, pitch, renderer.grid_shape, first_centre_px=first,
+  orientation_deg=t)`` describes the same lenslets in the same order (written there
+  independently).
 * The optic's pupil is relayed onto the lenslet array: camera point
   ``p = magnification * q + pupil_shift_px`` for optic pixel point ``q`` (both ``(col, row)``).
 * Spot ``k`` is displaced from its lenslet centre by ``gain * <grad W>_k``, where ``W`` is the
@@ -48,6 +58,7 @@ import logging
 import math
 import threading
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 import scipy.special
@@ -57,6 +68,7 @@ from wavestack.pipeline import zernike_gradient
 
 from wavestack.simulators._checks import (check_bit_depth, check_image_size, check_seed, finite_number, is_integer,
                                           read_only)
+from wavestack.simulators.lenslet_array import LensletArray
 from wavestack.simulators.optic import BitDepth, TestOptic
 
 logger = logging.getLogger(__name__)
@@ -74,9 +86,15 @@ class LensletArraySettings:
     pitch_px : float
         Lenslet pitch on the camera, pixels, ``>= 4``.
     offset_px : (float, float)
-        ``(col, row)`` of the outer (top-left) corner of lenslet (0, 0), pixels, ``>= -0.5``.
+        Lenslet (0, 0) is centred at ``offset_px + pitch_px / 2`` along both axes (an
+        axis-aligned square array: the top-left corner of its cell), pixels, ``>= -0.5``.
     grid_shape : (int, int) or None
-        ``(rows, cols)`` of lenslets; None: as many whole lenslets as fit in the frame.
+        ``(rows, cols)`` of lenslets; None: the most rows and columns whose cells all lie in
+        the frame (columns from the first two rows, then as many rows as hold them all).
+    lattice : {"square", "hexagonal"}
+        The array's kind (module notes).
+    orientation_deg : float
+        Angle of the lenslet rows from the camera's columns towards its rows, degrees.
     gain_px : float
         Spot displacement in pixels per wavefront slope of one wave per pixel, ``> 0``
         (``f lambda / p**2``, see :meth:`gain_for`).
@@ -111,6 +129,8 @@ class LensletArraySettings:
     pitch_px: float = 25.0
     offset_px: tuple[float, float] = (0.0, 0.0)
     grid_shape: tuple[int, int] | None = None
+    lattice: Literal["square", "hexagonal"] = "square"
+    orientation_deg: float = 0.0
     gain_px: float = 100.0
     spot_sigma_px: float = 1.5
     spot_peak: float = 0.5
@@ -134,6 +154,9 @@ class LensletArraySettings:
                 not is_integer(n) or n < 1 for n in self.grid_shape
             ):
                 raise ValueError(f"grid_shape: expected (rows, cols) >= 1 or None, got {self.grid_shape!r}")
+        if self.lattice not in ("square", "hexagonal"):
+            raise ValueError(f"lattice: expected 'square' or 'hexagonal', got {self.lattice!r}")
+        finite_number(self.orientation_deg, "orientation_deg")
         for name in ("gain_px", "spot_sigma_px", "magnification"):
             finite_number(getattr(self, name), name, above=0.0)
         for name in ("spot_peak", "background", "noise_rms"):
@@ -253,19 +276,9 @@ class SpotRenderer:
         self._optic = optic
         self._lenslets = lenslets
         self._size = (int(height), int(width))
-        pitch, (col0, row0) = lenslets.pitch_px, lenslets.offset_px
-        fitting = (int((height - 0.5 - row0) // pitch), int((width - 0.5 - col0) // pitch))
-        shape = fitting if lenslets.grid_shape is None else tuple(int(n) for n in lenslets.grid_shape)
-        if shape[0] < 1 or shape[1] < 1 or shape[0] > fitting[0] or shape[1] > fitting[1]:
-            raise ValueError(
-                f"grid_shape: {shape} lenslets of pitch {pitch} px from {lenslets.offset_px} do not fit "
-                f"in the {height} x {width} frame; at most {fitting}"
-            )
-        self._grid_shape = (int(shape[0]), int(shape[1]))
-        centres = np.empty((*self._grid_shape, 2))
-        centres[..., 0] = col0 + (np.arange(shape[1]) + 0.5)[None, :] * pitch
-        centres[..., 1] = row0 + (np.arange(shape[0]) + 0.5)[:, None] * pitch
-        self._centres = read_only(centres.reshape(-1, 2))
+        self._array = LensletArray(lenslets.pitch_px, lenslets.offset_px, lenslets.lattice, lenslets.orientation_deg)
+        self._grid_shape = self._array.shape_in(self._size, lenslets.grid_shape)
+        self._centres = read_only(self._array.centres(self._grid_shape))
         self._patch = 2 * math.ceil(_PATCH_SIGMAS * lenslets.spot_sigma_px) + 1
         if self._patch > min(self._size):
             raise ValueError(f"spot_sigma_px: spots of {self._patch} px do not fit in the frame")
@@ -311,17 +324,15 @@ class SpotRenderer:
         optic = self._optic
         state = optic.truth(0.0)  # aperture, revision and disk of one consistent rendering
         aperture, (cx, cy, radius), revision = state.aperture, state.pupil_px, state.aperture_revision
-        q = settings.fill_samples
-        nodes = ((np.arange(q) + 0.5) / q - 0.5) * settings.pitch_px
-        cols = self._centres[:, 0, None, None] + nodes[None, None, :]
-        rows = self._centres[:, 1, None, None] + nodes[None, :, None]
-        cols, rows = np.broadcast_arrays(cols, rows)  # (L, q, q) camera points
+        nodes = self._array.cell_nodes(settings.fill_samples)  # (Q, 2) midpoint nodes of one cell
+        cols = self._centres[:, 0, None] + nodes[None, :, 0]
+        rows = self._centres[:, 1, None] + nodes[None, :, 1]  # (L, Q) camera points
         shift_c, shift_r = settings.pupil_shift_px
-        optic_cols = (cols.reshape(len(self._centres), -1) - shift_c) / settings.magnification
-        optic_rows = (rows.reshape(len(self._centres), -1) - shift_r) / settings.magnification
-        inside = aperture.contains(optic_cols, optic_rows)  # (L, q*q)
+        optic_cols = (cols - shift_c) / settings.magnification
+        optic_rows = (rows - shift_r) / settings.magnification
+        inside = aperture.contains(optic_cols, optic_rows)  # (L, Q)
         count = inside.sum(axis=1)
-        fill = count / (q * q)
+        fill = count / len(nodes)
         lenslet, _ = np.nonzero(inside)
         u = (optic_cols[inside] - cx) / radius
         v = (cy - optic_rows[inside]) / radius
@@ -416,3 +427,4 @@ class SpotRenderer:
                  + first_col[:, None, None] + np.arange(patch)[None, None, :])
         spots = np.bincount(index.ravel(), weights=values.ravel(), minlength=height * width)
         frame += spots.reshape(height, width).astype(np.float32)
+

@@ -19,7 +19,7 @@ from .methods import (
 )
 from .normal_equations import IllConditionedBasis
 from .orthonormal import MAX_GRAM_CONDITION
-from .physical_terms import PhysicalTerms, physical_term_names, remove_physical_terms
+from .physical_terms import PhysicalTerms, physical_term_basis, physical_term_names, remove_physical_terms
 from .results import FitBasis, FitResult, FitterDiagnostics, InvalidFrame, Pupil
 from .store import FitterStore, fitter_key, load_fitter, save_fitter
 
@@ -53,6 +53,7 @@ __all__ = [
     "mapped_columns",
     "noise_gain",
     "normalised_gram",
+    "physical_term_basis",
     "physical_term_names",
     "remove_physical_terms",
     "save_fitter",

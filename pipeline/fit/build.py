@@ -220,9 +220,11 @@ def build_fitter(
     fit_mask : ndarray of shape (rows, cols), optional
         The pixels to fit (non-zero = fit), when they are not the aperture's: a measured map's
         own valid pixels, with drop-outs and isolated pixels, while the aperture is its clean
-        outline. Default: the aperture's mask. The aperture still gives the default pupil and
-        the domain of a mapped method's map; fitted pixels outside that domain take the map's
-        extrapolation from the nearest mesh triangle, clamped into the unit disk.
+        outline. Default: the aperture's mask. The aperture still gives the default pupil; a
+        mapped method maps the aperture trimmed to the fitted pixels (drop-outs filled, nothing
+        past the outermost fitted pixels: :func:`~wavestack.pipeline.fit.map_domain.map_domain`),
+        and fitted pixels outside that domain take the map's extrapolation from the nearest mesh
+        triangle, clamped into the unit disk.
     refit : {"auto", "moments", "operator"}
         How frames are projected on the basis. ``auto``: by separable Legendre moments (one pass
         over the frame, no N x M operator; :mod:`wavestack.pipeline.fit.moment_projection`) for
@@ -354,7 +356,7 @@ def _build(
     timings = {"aperture": time.perf_counter() - started}
 
     tick = time.perf_counter()
-    columns = method_columns(method, aperture, samples, mode_pairs, options, ratio)
+    columns = method_columns(method, aperture, samples, mode_pairs, options, ratio, fit_mask)
     timings["basis"] = time.perf_counter() - tick
     if columns.mapping is not None:
         timings.update({f"map_{stage}": seconds for stage, seconds in columns.mapping.timings.items()})

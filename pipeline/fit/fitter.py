@@ -14,7 +14,9 @@ aperture; :class:`Fitter` then refits any frame on that aperture:
    orthonormal coefficients to the method's own with an M x M matrix.
 
 The residual RMS comes from the normal-equation identity, so steps 1-3 are the whole per-frame
-cost. The residual map and its peak-to-valley take one more pass and are computed on request.
+cost. The residual map and its peak-to-valley take one more pass and are computed on request;
+with them the RMS is taken from the map itself (the identity ``|w|^2 - c.b`` cancels: with a
+float32 operator it rounds by a few per cent of a residual much smaller than the map).
 Where the moments come from the run pass (small apertures, degree <= 7) and no physical terms
 are removed, steps 1-3 are one compiled call (:mod:`wavestack.pipeline.fit.run_refit`).
 """
@@ -375,12 +377,13 @@ class Fitter:
                 pupil.radius,
             )
         residual_pv = residual_map = None
-        if residual:
+        residual_sq = solved.residual_sq
+        if residual:  # the residual's own sum of squares: exact where the identity rounds (float32)
             terms = np.concatenate([solved.basis, solved.removed])
-            residual_map, residual_pv = self._projection.residual(frame, projected, terms)
+            residual_map, residual_pv, residual_sq = self._projection.residual(frame, projected, terms)
         return FitResult(
             coefficients=self._coefficient_transform @ solved.basis,
-            residual_rms=math.sqrt(solved.residual_sq / n_valid),
+            residual_rms=math.sqrt(residual_sq / n_valid),
             valid_count=n_valid,
             nan_count=0 if projected.downdate is None else projected.downdate.count,
             basis=self.basis,

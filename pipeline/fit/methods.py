@@ -23,6 +23,7 @@ from .._checks import int_at_least, one_of
 from ..aperture import Aperture
 from ..mapping import LAPLACIANS, MAX_TARGET_VERTICES, CanonicalMap, conformal_map, csf_qcm_map
 from ..zernike import annular_zernike_basis, zernike_basis
+from .map_domain import map_domain
 
 METHODS = ("circle", "qr", "annulus", "conformal", "csf-qcm")
 MAPPED_METHODS = ("conformal", "csf-qcm")
@@ -138,6 +139,7 @@ def method_columns(
     modes: list[tuple[int, int]],
     options: MappingOptions,
     obscuration: float | None = None,
+    fit_mask: NDArray[np.bool_] | None = None,
 ) -> MethodColumns:
     """Basis columns of ``method`` on the samples.
 
@@ -150,6 +152,9 @@ def method_columns(
     options : MappingOptions
     obscuration : float, optional
         ``annulus`` only (required there): the obscuration ratio ``eps``.
+    fit_mask : ndarray of bool, optional
+        The pixels fitted when they are not the aperture's: a mapped method maps the aperture
+        trimmed to them (:func:`~wavestack.pipeline.fit.map_domain.map_domain`).
 
     Returns
     -------
@@ -169,6 +174,6 @@ def method_columns(
             raise ValueError("obscuration: expected the obscuration ratio of the annulus method, got None")
         return MethodColumns(annular_zernike_basis(modes, samples.x, samples.y, obscuration=obscuration))
     if method in MAPPED_METHODS:
-        mapping = canonical_map(aperture, method, options)
+        mapping = canonical_map(map_domain(aperture, fit_mask), method, options)
         return MethodColumns(mapped_columns(mapping, samples, modes), mapping)
     raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")

@@ -9,8 +9,9 @@ matrix all of ``A^T w`` and ``sum(w)``. Nothing of size N x M exists. Small aper
 degree 7 take the run pass (:mod:`~wavestack.pipeline.fit.run_moments`, float64 sums); wider
 float32 frames are summed in float32 products up to degree 7 (the moment_chunks docstring gives
 the precision), everything else in float64. A frame whose sums come out non-finite (a NaN or
-infinity inside the aperture, or overflow) has its bad samples found here, the NaN policy
-applied, and is summed again by the float64 chunked pass over the finite fitted samples.
+infinity inside the aperture, or overflow) has its bad samples found here and the NaN policy
+applied; set to the shift, they add nothing to the float64 pass over the fitted samples, and a
+downdate takes them out of the normal equations.
 """
 
 from __future__ import annotations
@@ -145,9 +146,18 @@ class MomentProjection:
             return self._summed(self._double, frame, shift, None)
         refuse_nonfinite(count, self.n_samples, self.n_columns, nan_policy)
         logger.debug("omitting %d non-finite samples by downdating the normal equations", count)
-        finite = ChunkedPass(self._strips, [~(o | b) for o, b in zip(self._outside, bad)], self._rows, self._cols,
-                             np.float64)
-        return self._summed(finite, frame, shift, self._downdate(bad, count))
+        downdate = self._downdate(bad, count)
+        # The dropped samples set to the shift add nothing to the sums (their w - s is exactly 0), so
+        # the float64 pass serves the frame as it is, and the downdate takes their rows out of the
+        # equations: no pass of its own is made for the finite samples.
+        filled = frame.astype(np.float64, copy=True)
+        for strip, dropped in zip(self._strips, bad):
+            filled[strip.row0:strip.row1, strip.col0:strip.col1][dropped] = shift
+        if self._runs is not None:
+            moments, squares = self._runs.moments(filled, shift)
+            if math.isfinite(squares):
+                return self._projected(moments, squares, shift, downdate)
+        return self._summed(self._double, filled, shift, downdate)
 
     def _first_pass(self, frame: NDArray, shift: float) -> Projected | None:
         """The fast pass for this frame, or None when its sums are not finite (:meth:`project` decides)."""
@@ -261,13 +271,13 @@ class MomentProjection:
         return full
 
     def residual(self, frame: NDArray, projected: Projected, terms: NDArray[np.float64]
-                 ) -> tuple[NDArray[np.float64], float]:
-        """The residual map ``w - A @ terms`` (NaN off the fitted or finite samples) and its PV."""
+                 ) -> tuple[NDArray[np.float64], float, float]:
+        """The residual map ``w - A @ terms`` (NaN off the fitted or finite samples), its PV and its sum of squares."""
         residual = self.evaluate(terms)  # NaN off the fitted pixels, which the subtraction keeps
         np.subtract(frame, residual, out=residual)
         residual[~np.isfinite(residual)] = np.nan
         peak_to_valley = float(np.nanmax(residual)) - float(np.nanmin(residual))
-        return residual, peak_to_valley
+        return residual, peak_to_valley, float(np.nansum(np.square(residual)))
 
 
 def _moment_map(transform: NDArray[np.float64], index: NDArray[np.intp], n_strips: int,

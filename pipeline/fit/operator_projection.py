@@ -97,20 +97,25 @@ class OperatorProjection:
         return self._scatter(self.operator[:, : terms.size] @ terms)
 
     def residual(self, frame: NDArray, projected: Projected, terms: NDArray[np.float64]
-                 ) -> tuple[NDArray[np.float64], float]:
-        """The residual map (NaN off the fitted or finite samples) and its peak-to-valley."""
+                 ) -> tuple[NDArray[np.float64], float, float]:
+        """The residual map (NaN off the fitted or finite samples), its peak-to-valley and its sum of squares."""
         # The terms in the operator's own type: a float64 vector against a float32 operator would
         # make numpy copy the whole operator to float64 on every call (7x the cost of the pass).
         # The residual is then as exact as the operator (float32: ~1e-7 relative to the map).
         centred = projected.centred
         assert centred is not None
         centred_residual = centred - self.operator @ terms.astype(self.operator.dtype)
-        if projected.bad is not None:  # the mean cancels in the peak-to-valley
-            centred_residual[projected.bad] = np.nan
-            peak_to_valley = float(np.nanmax(centred_residual)) - float(np.nanmin(centred_residual))
+        residual = centred_residual.astype(np.float64)
+        residual += projected.shift
+        if projected.bad is not None:  # dropped samples: NaN in the map, nothing in the sums
+            residual[projected.bad] = 0.0
+            squares = float(np.dot(residual, residual))
+            residual[projected.bad] = np.nan
+            peak_to_valley = float(np.nanmax(residual)) - float(np.nanmin(residual))
         else:
-            peak_to_valley = float(centred_residual.max()) - float(centred_residual.min())
-        return self._scatter(centred_residual.astype(np.float64) + projected.shift), peak_to_valley
+            squares = float(np.dot(residual, residual))
+            peak_to_valley = float(residual.max()) - float(residual.min())
+        return self._scatter(residual), peak_to_valley, squares
 
     def _scatter(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
         full = np.full(self.shape, np.nan)

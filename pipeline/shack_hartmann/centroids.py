@@ -1,17 +1,20 @@
 """Shack-Hartmann spot centres: a thresholded centre of gravity of every lenslet window at once.
 
-:class:`Centroider` precomputes everything that depends only on the grid;
-:func:`centroid_spots` is the one-call form. Conventions are those of
-:mod:`wavestack.pipeline.shack_hartmann`.
+:class:`Centroider` precomputes everything that depends only on the lattice and the frame shape;
+conventions are those of :mod:`wavestack.pipeline.shack_hartmann`.
 
-Windows. The subaperture of lenslet ``(i, j)`` is a window of ``W = floor(pitch)`` by ``W``
-pixels centred on the lenslet centre: its first column is the first pixel centre at or right
-of ``centre_col - W / 2`` (likewise for rows). For an integer pitch the windows tile the grid's
-bounding box exactly (pixel centres in ``[corner, corner + pitch)``), and the frame crop is
-reshaped to ``(rows, W, cols, W)`` without a copy. For a non-integer pitch the windows leave
-a strip of ``pitch - W < 1`` pixel between neighbours; they are gathered in one fancy-indexing
-operation from a sliding-window view (index arrays precomputed in the :class:`Centroider`),
-which costs one extra copy of the windows.
+Windows. The subaperture of a lenslet is a ``W`` by ``W`` pixel window centred on it
+(:meth:`~wavestack.pipeline.shack_hartmann.lattice.LensletLattice.window_starts`). Three layouts
+give the same windows:
+
+* a full axis-aligned square array (:meth:`~.lattice.LensletLattice.rectangle`) of integer
+  pitch: the windows tile the array's bounding box, and the frame crop is reshaped to
+  ``(rows, W, cols, W)`` without a copy;
+* the same of non-integer pitch: the windows leave a strip of ``pitch - W < 1`` pixel between
+  neighbours and are gathered in one fancy-indexing operation from a sliding-window view
+  (index arrays precomputed), one extra copy of the windows;
+* any other lattice (hexagonal, turned, partial): one ``W x W`` window per lenslet gathered
+  side by side, ``(1, W, L * W)``.
 
 References
 ----------
@@ -30,16 +33,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .._checks import finite_float, positive_int, real_image
-from .grid import LensletGrid
 from .lattice import LensletLattice
 from .lit import _check_threshold, _usable_lenslets, ThresholdKind
 
-__all__ = [
-    "Centroider",
-    "SpotMeasurement",
-    "camera_frame",
-    "centroid_spots",
-]
+__all__ = ["Centroider", "SpotMeasurement", "camera_frame"]
 
 logger = logging.getLogger(__name__)
 
@@ -49,8 +46,7 @@ logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True, eq=False)
 class SpotMeasurement:
-    """Spot centres of one frame, one entry per lenslet (row-major for a grid, in the order of
-    the sites for a lattice).
+    """Spot centres of one frame, one entry per lenslet (in the order of the lattice's sites).
 
     Attributes
     ----------
@@ -90,7 +86,7 @@ class SpotMeasurement:
 
 @dataclass(frozen=True, eq=False)
 class Centroider:
-    """Thresholded centre of gravity of every subaperture, precomputed for one grid and frame shape.
+    """Thresholded centre of gravity of every subaperture, precomputed for one lattice and frame shape.
 
     Build with :meth:`build`; :meth:`measure` then costs a handful of passes over the
     ``rows * cols * W^2`` window pixels and no Python loop over lenslets:
@@ -114,10 +110,9 @@ class Centroider:
 
     Attributes
     ----------
-    grid : LensletGrid or LensletLattice
-        A square grid (windows of side ``floor(pitch)``) or a square or hexagonal lattice at
-        any orientation (windows inside each lenslet's Voronoi cell, see
-        :mod:`~wavestack.pipeline.shack_hartmann.lattice`), gathered per lenslet.
+    grid : LensletLattice
+        The lenslets, square or hexagonal at any orientation (windows inside each lenslet's
+        Voronoi cell, see :mod:`~wavestack.pipeline.shack_hartmann.lattice`).
     frame_shape : tuple of int
         ``(rows, cols)`` of the frames this centroider accepts.
     threshold : float
@@ -133,7 +128,7 @@ class Centroider:
         Lenslets whose centre lies inside the mask given to :meth:`build` (all True without).
     """
 
-    grid: LensletGrid | LensletLattice
+    grid: LensletLattice
     frame_shape: tuple[int, int]
     threshold: float
     threshold_kind: ThresholdKind
@@ -143,7 +138,7 @@ class Centroider:
     _row_starts: NDArray[np.intp] = field(repr=False)
     _col_starts: NDArray[np.intp] = field(repr=False)
     _width: int = field(repr=False)
-    _layout: str = field(repr=False)  # "crop", "gather" (separable grid) or "lattice"
+    _layout: str = field(repr=False)  # "crop", "gather" (a rectangular array) or "lattice"
     _gather_rows: NDArray[np.intp] = field(repr=False)
     _weights_row: NDArray[np.float32] = field(repr=False)  # (2, W): [1, dy]
     _weights_col: NDArray[np.float32] = field(repr=False)  # (W, 2): [1, dx]
@@ -153,7 +148,7 @@ class Centroider:
     @classmethod
     def build(
         cls,
-        grid: LensletGrid | LensletLattice,
+        grid: LensletLattice,
         frame_shape: tuple[int, int],
         *,
         threshold: float = 0.1,
@@ -161,11 +156,11 @@ class Centroider:
         min_intensity: float = 0.0,
         mask: ArrayLike | None = None,
     ) -> Centroider:
-        """Precompute the windows and weights for a grid on frames of one shape.
+        """Precompute the windows and weights for a lattice on frames of one shape.
 
         Parameters
         ----------
-        grid : LensletGrid or LensletLattice
+        grid : LensletLattice
         frame_shape : tuple of int
             ``(rows, cols)`` of the camera frames, pixels.
         threshold : float, default 0.1
@@ -177,8 +172,7 @@ class Centroider:
             set it (or ``mask``) to reject dark subapertures.
         mask : array_like of bool, optional
             Aperture mask, either of ``frame_shape`` (a lenslet is usable when the pixel
-            nearest its centre is True), of ``grid.shape`` for a grid, or of ``(L,)`` (one
-            flag per lenslet).
+            nearest its centre is True) or of ``(L,)`` (one flag per lenslet).
 
         Returns
         -------
@@ -187,12 +181,12 @@ class Centroider:
         Raises
         ------
         ValueError
-            If the grid's windows leave the frame, ``frame_shape`` is not two positive
+            If the lattice's windows leave the frame, ``frame_shape`` is not two positive
             integers, the threshold or its kind is invalid, ``min_intensity`` is negative or
             not finite, or the mask has neither accepted shape.
         """
-        if not isinstance(grid, (LensletGrid, LensletLattice)):
-            raise ValueError(f"grid must be a LensletGrid or LensletLattice, got {type(grid).__name__}")
+        if not isinstance(grid, LensletLattice):
+            raise ValueError(f"grid must be a LensletLattice, got {type(grid).__name__}")
         try:
             n_rows, n_cols = frame_shape
         except (TypeError, ValueError):
@@ -208,8 +202,10 @@ class Centroider:
         row_starts, col_starts, width = grid.window_starts()
         local = np.arange(width, dtype=np.float64) - 0.5 * (width - 1)
         weights_row = np.stack([np.ones(width), local]).astype(np.float32)
-        if isinstance(grid, LensletGrid):
-            blocks = grid.shape
+        rectangle = grid.rectangle()
+        if rectangle is not None:  # one start per lenslet row and per lenslet column
+            blocks = rectangle
+            row_starts, col_starts = row_starts[:: rectangle[1]], col_starts[: rectangle[1]]
             contiguous = bool(np.all(np.diff(row_starts) == width) and np.all(np.diff(col_starts) == width))
             layout = "crop" if contiguous else "gather"
             corner = np.stack(np.broadcast_arrays(col_starts[None, :], row_starts[:, None]), axis=-1)
@@ -334,53 +330,6 @@ def camera_frame(frame: ArrayLike, name: str = "frame") -> NDArray:
         If ``frame`` is not a 2-D array of real numbers (booleans and complex are refused).
     """
     return np.ascontiguousarray(real_image(frame, name))
-
-
-def centroid_spots(
-    frame: ArrayLike,
-    grid: LensletGrid | LensletLattice,
-    *,
-    threshold: float = 0.1,
-    threshold_kind: ThresholdKind = "relative",
-    min_intensity: float = 0.0,
-    mask: ArrayLike | None = None,
-) -> SpotMeasurement:
-    """Thresholded centre of gravity of every subaperture of one frame.
-
-    A one-shot convenience: it builds a :class:`Centroider` (precomputation) and measures.
-    For a stream of frames build the centroider once and call :meth:`Centroider.measure`.
-
-    Parameters
-    ----------
-    frame : array_like, shape (rows, cols)
-        Camera frame, any real dtype and memory layout (see :func:`camera_frame`).
-    grid : LensletGrid or LensletLattice
-    threshold, threshold_kind, min_intensity, mask
-        As for :meth:`Centroider.build`.
-
-    Returns
-    -------
-    SpotMeasurement
-
-    Raises
-    ------
-    ValueError
-        As for :meth:`Centroider.build` and :meth:`Centroider.measure`.
-
-    References
-    ----------
-    Thomas et al. (2006), MNRAS 371, 323 (thresholded centre of gravity).
-    """
-    image = camera_frame(frame)
-    centroider = Centroider.build(
-        grid,
-        image.shape,
-        threshold=threshold,
-        threshold_kind=threshold_kind,
-        min_intensity=min_intensity,
-        mask=mask,
-    )
-    return centroider.measure(image)
 
 
 def _gather_rows_cols(

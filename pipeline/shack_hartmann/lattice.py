@@ -1,17 +1,23 @@
-"""A lenslet array of any lattice on the camera: two basis vectors, an origin and the lenslets used.
+"""The lenslet array on the camera, square or hexagonal: two basis vectors, an origin and the lenslets used.
 
 Real sensors carry square or hexagonal lenslet arrays, often turned against the pixel grid.
-:class:`LensletLattice` describes both: lenslet ``k`` sits at ``origin + n1_k a1 + n2_k a2``
-for integer site indices ``(n1_k, n2_k)``. A square lattice has ``|a1| = |a2|`` at 90 degrees,
-a hexagonal one ``|a1| = |a2|`` at 60 degrees. Positions are ``(col, row)`` pairs in pixels
-(conventions in :mod:`wavestack.pipeline.shack_hartmann`).
+:class:`LensletLattice` describes both (the one lattice type of the package): lenslet ``k`` sits
+at ``origin + n1_k a1 + n2_k a2`` for integer site indices ``(n1_k, n2_k)``. A square lattice
+has ``|a1| = |a2|`` at 90 degrees, a hexagonal one ``|a1| = |a2|`` at 60 degrees. Positions are
+``(col, row)`` pairs in pixels (conventions in :mod:`wavestack.pipeline.shack_hartmann`).
+
+Arrays. :meth:`LensletLattice.array` lays out ``rows x cols`` lenslets as a sensor's datasheet
+describes them: row ``i`` along ``a1``, rows stacked along ``a2``; on a hexagonal lattice every
+odd row is shifted by half a pitch along ``a1`` (so the rows stay stacked, the array stays a
+rectangle), and lenslets are numbered row-major, ``k = i * cols + j``.
 
 Windows. Each lenslet is centroided in a square ``W x W`` pixel window centred on it (first
-pixel the first pixel centre at or past ``centre - W / 2``, as for :class:`LensletGrid`), with
-``W`` the side of the largest axis-aligned square around a site that stays inside its Voronoi
-cell (the points nearer to it than to any other site): the windows of neighbours never
-overlap. For an axis-aligned square lattice that is the pitch, as for :class:`LensletGrid`; for
-a hexagonal lattice with a1 along the columns it is ``pitch / (1/2 + sqrt(3)/2) = 0.732 pitch``.
+pixel the first pixel centre at or past ``centre - W / 2``), with ``W`` the side of the largest
+axis-aligned square around a site that stays inside its Voronoi cell (the points nearer to it
+than to any other site): the windows of neighbours never overlap. For an axis-aligned square
+lattice that is ``floor(pitch)``, and the windows of a full rectangular array tile its bounding
+box (:meth:`LensletLattice.rectangle`); for a hexagonal lattice with a1 along the columns it is
+``pitch / (1/2 + sqrt(3)/2) = 0.732 pitch``.
 """
 
 from __future__ import annotations
@@ -23,15 +29,21 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .._checks import finite_float
-from .grid import _EDGE_TOL, _MIN_PITCH_PX
+from .._checks import finite_float, positive_int
 
 __all__ = ["LatticeKind", "LensletLattice"]
+
+_MIN_PITCH_PX = 4.0  # smallest lenslet pitch accepted, pixels
+_EDGE_TOL = 1e-9  # pixels: a window edge this close to a pixel centre counts as on it
 
 LatticeKind = Literal["square", "hexagonal"]
 
 _ANGLES = {"square": 90.0, "hexagonal": 60.0}  # degrees between a1 and a2
 _SHAPE_TOL = 0.01  # relative: |a1| and |a2| equal, and the angle right to 0.01 rad
+_UNIT = {  # unit basis (e1, e2) of each kind, (d_col, d_row), a1 along the columns
+    "square": np.array([[1.0, 0.0], [0.0, 1.0]]),
+    "hexagonal": np.array([[1.0, 0.0], [0.5, 0.5 * math.sqrt(3.0)]]),
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,6 +108,64 @@ class LensletLattice:
         object.__setattr__(self, "origin_px", origin)
         object.__setattr__(self, "sites", sites)
 
+    @classmethod
+    def array(cls, kind: LatticeKind, pitch_px: float, shape: tuple[int, int], *, first_centre_px: tuple[float, float],
+              orientation_deg: float = 0.0) -> LensletLattice:
+        """A sensor's ``rows x cols`` lenslet array (module notes), numbered row-major.
+
+        Parameters
+        ----------
+        kind : {"square", "hexagonal"}
+        pitch_px : float
+            Distance between neighbouring lenslets, pixels, ``>= 4``.
+        shape : (int, int)
+            ``(rows, cols)`` of lenslets, both ``>= 1``.
+        first_centre_px : (float, float)
+            ``(col, row)`` of the centre of lenslet ``(0, 0)``, pixels.
+        orientation_deg : float
+            Angle of the rows (``a1``) from the column axis towards the row axis, degrees.
+
+        Returns
+        -------
+        LensletLattice
+            Lenslet ``k = i * cols + j`` at site ``(j - i // 2, i)`` on a hexagonal lattice and
+            ``(j, i)`` on a square one.
+
+        Raises
+        ------
+        ValueError
+            If an argument is out of range (as for the class).
+
+        Examples
+        --------
+        >>> hexagonal = LensletLattice.array("hexagonal", 20.0, (2, 3), first_centre_px=(10.0, 10.0))
+        >>> hexagonal.centres().round(2).tolist()
+        [[10.0, 10.0], [30.0, 10.0], [50.0, 10.0], [20.0, 27.32], [40.0, 27.32], [60.0, 27.32]]
+        """
+        if kind not in _UNIT:
+            raise ValueError(f"kind must be 'square' or 'hexagonal', got {kind!r}")
+        pitch = finite_float(pitch_px, "pitch_px")
+        if pitch < _MIN_PITCH_PX:
+            raise ValueError(f"pitch_px must be >= {_MIN_PITCH_PX} pixels, got {pitch!r}")
+        try:
+            first = (finite_float(first_centre_px[0], "first_centre_px[0]"),
+                     finite_float(first_centre_px[1], "first_centre_px[1]"))
+            if len(first_centre_px) != 2:
+                raise IndexError
+        except (TypeError, IndexError):
+            raise ValueError(f"first_centre_px must be a pair (col, row), got {first_centre_px!r}") from None
+        try:
+            rows, cols = shape
+        except (TypeError, ValueError):
+            raise ValueError(f"shape must be a pair (rows, cols), got {shape!r}") from None
+        rows, cols = positive_int(rows, "shape[0]"), positive_int(cols, "shape[1]")
+        angle = math.radians(finite_float(orientation_deg, "orientation_deg"))
+        rotation = np.array([[math.cos(angle), math.sin(angle)], [-math.sin(angle), math.cos(angle)]])
+        basis = pitch * _UNIT[kind] @ rotation
+        i, j = np.divmod(np.arange(rows * cols), cols)
+        sites = np.column_stack([j - i // 2 if kind == "hexagonal" else j, i])
+        return cls(kind, (tuple(basis[0]), tuple(basis[1])), first, sites)
+
     @property
     def count(self) -> int:
         """Number of lenslets ``L``."""
@@ -120,6 +190,39 @@ class LensletLattice:
         """Lenslet centres ``(x, y) = (col, -row)``, pixels, shape (L, 2) (the reconstructors' input)."""
         centres = self.centres()
         return np.column_stack([centres[:, 0], -centres[:, 1]])
+
+    def cell_vertices(self) -> NDArray[np.float64]:
+        """Corners of a lenslet's cell (its Voronoi cell) about its centre, ``(d_col, d_row)`` pixels.
+
+        Returns
+        -------
+        ndarray, shape (4, 2) for a square lattice or (6, 2) for a hexagonal one
+            A square of side ``pitch`` or a hexagon of circumradius ``pitch / sqrt(3)``, turned
+            with the lattice, in order around the cell.
+        """
+        a1, a2 = np.asarray(self.basis_px)
+        if self.kind == "square":
+            return 0.5 * np.array([a1 + a2, a2 - a1, -a1 - a2, a1 - a2])
+        # the hexagon's corners are the circumcentres of the triangles of neighbouring sites
+        neighbours = np.array([a1, a2, a2 - a1, -a1, -a2, a1 - a2])
+        return (neighbours + np.roll(neighbours, -1, axis=0)) / 3.0
+
+    def rectangle(self) -> tuple[int, int] | None:
+        """``(rows, cols)`` when the lenslets are a full, axis-aligned square array in row-major
+        order (sites ``(j + c, i + r)``): their windows then form a block grid that is
+        centroided without a per-lenslet gather. None otherwise."""
+        (d_col, d_row), (e_col, e_row) = self.basis_px
+        if self.kind != "square" or d_row != 0.0 or e_col != 0.0 or d_col != e_row:
+            return None
+        n1, n2 = self.sites[:, 0], self.sites[:, 1]
+        cols = int(n1.max() - n1.min() + 1)
+        rows = int(n2.max() - n2.min() + 1)
+        if rows * cols != self.count:
+            return None
+        i, j = np.divmod(np.arange(self.count), cols)
+        if not (np.array_equal(n1 - n1.min(), j) and np.array_equal(n2 - n2.min(), i)):
+            return None
+        return rows, cols
 
     def window_width(self) -> int:
         """Side ``W`` of the lenslet windows, pixels: the largest axis-aligned square around a

@@ -41,7 +41,7 @@ import scipy.spatial
 from numpy.typing import ArrayLike, NDArray
 
 from .centroids import Centroider, camera_frame
-from .lattice import LatticeKind, LensletLattice
+from .lattice import _UNIT, LatticeKind, LensletLattice
 
 __all__ = ["detect_lattice"]
 
@@ -54,10 +54,6 @@ _NN_SPREAD = 0.10  # nearest-neighbour distances within this fraction of their m
 _NN_INSIDE = 0.90  # ... for at least this fraction of the spots
 _ORDER = 0.9  # 4- or 6-fold orientational order needed
 _RESIDUAL = 0.25  # every spot within this fraction of the pitch of its lattice site
-_UNIT = {  # unit basis (e1, e2) of each kind, (d_col, d_row)
-    "square": np.array([[1.0, 0.0], [0.0, 1.0]]),
-    "hexagonal": np.array([[1.0, 0.0], [0.5, 0.5 * math.sqrt(3.0)]]),
-}
 
 
 def detect_lattice(frame: ArrayLike) -> LensletLattice:

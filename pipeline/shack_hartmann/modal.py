@@ -2,8 +2,8 @@
 
 Both reconstructors (this one and the zonal one) take slopes ``dW/dx, dW/dy`` (x right, y up) in
 *wavefront units per unit of the lenslet coordinates*: with lenslet centres in camera pixels
-(``LensletGrid.centres_xy`` or ``LensletLattice.centres_xy``: the modal reconstructor needs
-only the centres, so any lattice works) and slopes in radians from
+(``LensletLattice.centres_xy``: the modal reconstructor needs only the centres, so any
+lattice works) and slopes in radians from
 :func:`~wavestack.pipeline.shack_hartmann.spot_slopes.slopes`, multiply the slopes by the pixel
 size in micrometres (:func:`~wavestack.pipeline.shack_hartmann.spot_slopes.convert_slopes` with
 ``wavefront_unit_um=1, length_unit_um=pixel_um``) and the result comes out in micrometres.
@@ -171,7 +171,7 @@ class ModalReconstructor:
         Parameters
         ----------
         centres_xy : array_like, shape (L, 2)
-            Lenslet centres ``(x, y)``, x right, y up (e.g. ``grid.centres_xy()``, pixels).
+            Lenslet centres ``(x, y)``, x right, y up (e.g. ``lattice.centres_xy()``, pixels).
         pupil_centre : tuple of float
             ``(x, y)`` of the pupil centre, same coordinates.
         pupil_radius : float
@@ -230,7 +230,7 @@ class ModalReconstructor:
         ----------
         centres_xy : array_like, shape (L, 2)
             Lenslet centres in the mesh's coordinates: pixels, ``(col, -row)``
-            (``grid.centres_xy()``).
+            (``lattice.centres_xy()``).
         mapping : CanonicalMap
         modes : sequence of (int, int)
         valid : array_like of bool, shape (L,), optional

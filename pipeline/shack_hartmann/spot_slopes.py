@@ -17,7 +17,7 @@ from .centroids import SpotMeasurement
 
 @dataclass(frozen=True, eq=False)
 class SlopeResult:
-    """Wavefront slopes per lenslet (row-major).
+    """Wavefront slopes per lenslet (in the order of the lattice's sites).
 
     Attributes
     ----------
@@ -54,9 +54,9 @@ def slopes(
     ----------
     measurement : SpotMeasurement
         Spots of the aberrated frame, L lenslets.
-    reference : SpotMeasurement or array_like of shape (L, 2) or (rows, cols, 2)
+    reference : SpotMeasurement or array_like of shape (L, 2)
         Reference spot positions ``(col, row)`` in pixels: a measurement of a flat wavefront,
-        or e.g. ``grid.centres()``.
+        or e.g. ``lattice.centres()`` (the ideal reference).
     focal_length_um : float
         Lenslet focal length, micrometres, ``> 0``.
     pixel_um : float
@@ -85,13 +85,10 @@ def slopes(
         ref_positions, ref_valid = reference.centroids, reference.valid
     else:
         ref_positions = np.asarray(reference, dtype=np.float64)
-        if ref_positions.ndim == 3 and ref_positions.shape[2] == 2:
-            ref_positions = ref_positions.reshape(-1, 2)
         ref_valid = np.isfinite(ref_positions).all(axis=1) if ref_positions.ndim == 2 else None
     if ref_positions.shape != (count, 2):
         raise ValueError(
-            f"reference must hold {count} positions (L, 2) or (rows, cols, 2) like the measurement, "
-            f"got shape {np.shape(ref_positions)}"
+            f"reference must hold {count} positions (L, 2) like the measurement, got shape {np.shape(ref_positions)}"
         )
     valid = measurement.valid & ref_valid
     displacement = measurement.centroids - ref_positions
@@ -136,32 +133,3 @@ def convert_slopes(
         wavefront_unit_um, "wavefront_unit_um"
     )
     return result.slopes_x * factor, result.slopes_y * factor
-
-
-def slopes_in_waves_per_radius(
-    result: SlopeResult, wavelength_um: float, pupil_radius_um: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Slopes in waves per pupil radius: ``dW/du`` with ``W`` in waves and ``u = x / R``.
-
-    These are the derivatives of the wavefront written as a function on the unit disk, the
-    units in which unit-RMS Zernike gradients are tabulated.
-
-    Parameters
-    ----------
-    result : SlopeResult
-        Slopes in radians.
-    wavelength_um : float
-        Wavelength, micrometres, ``> 0``.
-    pupil_radius_um : float
-        Pupil radius in the lenslet plane, micrometres, ``> 0``.
-
-    Returns
-    -------
-    slopes_x, slopes_y : ndarray, shape (L,)
-
-    Raises
-    ------
-    ValueError
-        As for :func:`convert_slopes`.
-    """
-    return convert_slopes(result, wavefront_unit_um=wavelength_um, length_unit_um=pupil_radius_um)

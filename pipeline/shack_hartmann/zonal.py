@@ -9,7 +9,7 @@ normal equations (a graph Laplacian), factorised once with one phase pinned per 
 group of lenslets; piston is then set to zero mean over each group. (Fried's geometry, with
 the phase at the lenslet corners, is not implemented: it has an unsensed waffle mode, and the
 co-located Southwell estimate is what the modal results are compared with.) The neighbour
-pairs are those of a square grid (a :class:`~wavestack.pipeline.shack_hartmann.grid.LensletGrid`);
+pairs are those of a full square array (rows and columns of lenslets, ``LensletLattice.rectangle``);
 a hexagonal lattice goes through the modal reconstructor.
 
 References

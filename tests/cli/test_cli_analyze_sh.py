@@ -1,5 +1,7 @@
 """`wavestack analyze` on Shack-Hartmann spot images written here from a known wavefront, end to end.
 
+Last, the real frames of a hexagonal sensor (``../shared/data/external``).
+
 The sensor: a 400 x 420 camera of 5.5 um pixels behind a hexagonal lenslet array of pitch
 28 px (154 um), turned by 5 degrees, focal length 4 mm, at 632.8 nm. Spot ``k`` is a Gaussian
 (sigma 1.4 px) displaced from its lenslet centre by ``f * grad W`` at the centre, so the modal
@@ -12,16 +14,20 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
+import scipy.io
 
 from wavestack.cli import main
-from wavestack.pipeline.shack_hartmann import LensletLattice, ModalReconstructor, centroid_spots
+from wavestack.pipeline.shack_hartmann import Centroider, LensletLattice, ModalReconstructor, detect_lattice
 from wavestack.pipeline.zernike.circle import zernike_gradient
 from wavestack.pipeline.zernike.indices import mode_list
 from wavestack.pipeline.zernike.normalisation import normalisation_factor
+
+from shared_data import DATA, require_shared_data
 
 SIZE = (400, 420)
 PITCH_PX, PIXEL_UM, FOCAL_MM, WAVELENGTH_NM = 28.0, 5.5, 4.0, 632.8
@@ -77,8 +83,9 @@ def sensor(tmp_path_factory):
 def tolerance(sensor) -> np.ndarray:
     """Per-coefficient bound: 5 sigma of the measured centroid noise through the reconstructor."""
     _, lattice, spots, reference, image = sensor
-    errors = np.concatenate([centroid_spots(reference, lattice).centroids - lattice.centres(),
-                             centroid_spots(image, lattice).centroids - spots])
+    centroider = Centroider.build(lattice, SIZE)
+    errors = np.concatenate([centroider.measure(reference).centroids - lattice.centres(),
+                             centroider.measure(image).centroids - spots])
     sigma_px = float(np.sqrt(np.mean(errors**2)))  # per axis, per image
     # slope of one spot difference (two images): sqrt(2) sigma, in waves per pixel
     sigma_slope = math.sqrt(2.0) * sigma_px / GAIN
@@ -194,3 +201,32 @@ def test_interferogram_aperture_options_are_refused(capsys, sensor, option) -> N
     folder, *_ = sensor
     one_line_error(capsys, [str(folder / "spots.png"), "--reference", str(folder / "reference.png"), *COMMON, *option],
                    "spots.png", "--aperture and --mask apply to interferograms")
+
+
+@require_shared_data()
+def test_a_real_hexagonal_sensor(capsys, tmp_path) -> None:
+    """The real frames of a hexagonal 127-lenslet sensor (mshwfs: 300 um pitch on 7.4 um pixels,
+    40.5 px; a reference and an aberrated frame, MATLAB files written here as float TIFFs): the
+    lattice is found hexagonal with every lenslet, at the datasheet's pitch."""
+    frames = {}
+    for name, key in (("mshwfs_sh_flat.mat", "sh_flat"), ("mshwfs_img.mat", "img")):
+        frames[key] = tmp_path / f"{key}.tif"
+        assert cv2.imwrite(str(frames[key]), scipy.io.loadmat(DATA / "external" / name)[key].astype(np.float32))
+    report = analyze(capsys, str(frames["img"]), "--reference", str(frames["sh_flat"]), "--focal-length-mm", "5",
+                     "--pixel-um", "7.4", "--wavelength-nm", "632.8", "--modes", "15")
+    lattice = report["lattice"]
+    assert lattice["kind"] == "hexagonal" and lattice["lenslets"] == report["used_lenslets"] == 127
+    assert lattice["pitch_px"] == pytest.approx(300 / 7.4, rel=0.01)
+    assert report["condition"] < 2.0  # 127 lenslets over the disk they cover: 15 modes well apart
+    found = detect_lattice(cv2.imread(str(frames["img"]), cv2.IMREAD_UNCHANGED))
+    assert found.kind == "hexagonal" and found.count == 127  # the aberrated frame alone too
+
+
+def test_the_config_describes_the_sensor_alone(capsys, sensor) -> None:
+    folder, *_ = sensor
+    station = Path(__file__).resolve().parents[1] / "configs" / "sh-small.toml"
+    one_line_error(capsys, [str(folder / "spots.png"), "--config", str(station), "--reference",
+                            str(folder / "reference.png")], "spots.png", "--config describes the sensor", "--reference")
+    interferometer = Path(__file__).resolve().parents[1] / "configs" / "station-small.toml"
+    one_line_error(capsys, [str(folder / "spots.png"), "--config", str(interferometer)], "station-small.toml",
+                   "kind = 'interferometer'", "Shack-Hartmann station file")

@@ -161,3 +161,48 @@ def test_unknown_hdf5_layout_is_named(capsys, tmp_path) -> None:
     message = _one_line_error(capsys, ["analyze", str(path)])
     assert "camera.h5: an HDF5 file of unknown layout (top level: frames)" in message
     assert "--wavelength-nm" not in message
+
+
+# Long thin strips from real instruments fit by default with kappa(G) <= 20: a basis orthonormal on
+# the samples gives 1, a 33 x 259 elliptical strip 7.9 (tests/pipeline/fit/test_auto.py); 20 leaves
+# room for ragged edges and drop-outs while a map whose domain reaches past the samples (122 on the
+# real strip, thousands on the synthetic one below) is well outside it.
+_STRIP_GRAM_CONDITION = 20.0
+
+
+def _ragged_strip(seed: int = 4) -> np.ndarray:
+    """A 259 x 37 strip, 31 px wide and 8:1, its sides slanted by 3 px (a pixel staircase on both
+    edges, as on the real Zygo strip), its ends rounded, with twelve 3 x 2 px drop-outs inside."""
+    rows, cols = np.mgrid[:259, :37].astype(np.float64)
+    along = (rows - 129) / 129  # -1 .. 1 along the strip
+    half_width = 15.5 * np.sqrt(np.clip(1 - along**8, 0, 1))
+    valid = np.abs(cols - (16.5 + 3 * rows / 258)) <= half_width
+    rng = np.random.default_rng(seed)
+    for _ in range(12):
+        row, col = rng.integers(20, 239), rng.integers(6, 28)
+        valid[row:row + 3, col:col + 2] = False
+    return valid
+
+
+def test_ragged_strip_with_drop_outs_fits_well_conditioned_by_default(capsys, tmp_path) -> None:
+    valid = _ragged_strip()
+    rows, cols = np.mgrid[:259, :37].astype(np.float64)
+    surface = np.where(valid, 30 * (rows / 258) ** 2 - 4 * cols / 36, np.nan)
+    path = tmp_path / "ragged.datx"
+    _write_datx(path, surface)
+    report = _run(capsys, "analyze", str(path))
+    assert report["fit_method"] == "csf-qcm"
+    assert report["pixels"]["measured"] == report["pixels"]["fitted"] == int(valid.sum())
+    assert report["pixels"]["dropouts_inside_aperture"] >= 12 * 6  # every drop-out counted, none fitted
+    assert report["diagnostics"]["gram_condition"] <= _STRIP_GRAM_CONDITION
+    # the surface is a smooth quadratic: the fit explains it to well under a nm
+    assert report["residual_rms_waves"] * report["wavelength_nm"] < 0.5
+
+
+@require_shared_data()
+def test_real_zygo_strip_fits_well_conditioned_by_default(capsys) -> None:
+    path = DATA / "external" / "monolithic_zygo_test.datx"
+    report = _run(capsys, "analyze", str(path))
+    assert report["fit_method"] == "csf-qcm"
+    assert report["pixels"]["measured"] == report["pixels"]["fitted"] == 7771
+    assert report["diagnostics"]["gram_condition"] <= _STRIP_GRAM_CONDITION

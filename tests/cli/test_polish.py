@@ -86,3 +86,18 @@ def test_a_campaign_prints_records_and_draws_every_run(tmp_path: Path) -> None:
         assert f.attrs["final_phase"] == "max-runs" and f["runs/job_id"][0] == run["job_id"]
         assert f["runs/job_crc32"][0] == run["job_crc32"] and f["measurements/rms_nm"].shape == (2,)
     assert (plots / "run-001.png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.slow
+def test_a_campaign_stops_when_the_drawing_is_met_and_names_the_limiting_quantity(tmp_path: Path) -> None:
+    config = tmp_path / "polishing.toml"
+    config.write_text(polishing_text(small=True))
+    # the simulated part (about 50 nm RMS) is within 5 fringes everywhere: met on the first
+    # measurement, no job sent, whatever the RMS target says
+    done = _run("polish", "--config", str(config), "--max-runs", "2", "--target-rms-nm", "0", "--json",
+                "--spec", "3/5(5/5; RMSi < 1)")
+    assert done.returncode == 0, done.stderr
+    summary = json.loads(done.stdout.splitlines()[-1])
+    assert summary["final_phase"] == "target-met" and summary["runs_done"] == 0 and summary["job_ids"] == []
+    assert summary["spec"]["passed"] is True and summary["spec"]["limiting"] in ("SAG", "IRR", "RSI", "RMSi")
+    assert "3/5(5/5; RMSi < 1): PASS, limiting" in summary["reason"]

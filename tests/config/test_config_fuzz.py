@@ -39,7 +39,8 @@ from wavestack.simulators.spots import LensletArraySettings
 
 ROOT = Path(__file__).resolve().parents[2]
 BASES = [tomllib.loads(path.read_text(encoding="utf-8")) for path in (
-    DEFAULT_CONFIG, ROOT / "config" / "shack-hartmann.toml", ROOT / "config" / "station-hardware.example.toml")]
+    DEFAULT_CONFIG, ROOT / "config" / "shack-hartmann.toml", ROOT / "config" / "shack-hartmann-hex.toml",
+    ROOT / "config" / "station-hardware.example.toml")]
 SCHEMAS: dict[tuple[str, ...], type] = {
     ("station",): StationSettings, ("processing",): ProcessingSettings, ("camera",): CameraSettings,
     ("camera", "simulator"): CameraSimulatorSettings, ("pzt",): PiezoSettings, ("pzt", "simulator"): PiezoSimulatorSettings,

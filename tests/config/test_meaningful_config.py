@@ -148,7 +148,8 @@ def test_a_carrier_station_ignores_the_phase_steps() -> None:
     assert parse_station_config(text, source=SOURCE).processing.frames_per_set == 1
 
 
-STATION_FILES = [DEFAULT_CONFIG, ROOT / "config" / "shack-hartmann.toml", ROOT / "config" / "station-hardware.example.toml",
+STATION_FILES = [DEFAULT_CONFIG, ROOT / "config" / "shack-hartmann.toml", ROOT / "config" / "shack-hartmann-hex.toml",
+                 ROOT / "config" / "station-hardware.example.toml",
                  ROOT / "config" / "tma-alignment-remote-station.toml",
                  *sorted((ROOT / "tests" / "configs").glob("*.toml"))]
 
@@ -190,5 +191,18 @@ def test_rings_beyond_the_memory_bound_are_refused() -> None:
 def test_a_lenslet_grid_larger_than_the_simulated_frame_is_refused() -> None:
     text = with_keys((ROOT / "config" / "shack-hartmann.toml").read_text(encoding="utf-8"), "camera.simulator",
                      width="640")
-    assert re.search(r"\[shack_hartmann\] pitch_px, offset_px, grid_shape: grid .* expected them inside the frame of "
-                     r"shape \(1024, 640\) \(\[camera.simulator\] width 640, height 1024\)", refused(text))
+    assert re.search(r"\[shack_hartmann\] pitch_px, offset_px, grid_shape: 800 of 1600 lenslet windows of the square "
+                     r"lattice .* leave the frame of shape \(1024, 640\); expected all inside \(\[camera.simulator\] "
+                     r"width 640, height 1024\)", refused(text))
+    # the hexagonal station's array likewise; with lattice = "auto" the simulated array's kind is checked
+    hexagonal = with_keys((ROOT / "config" / "shack-hartmann-hex.toml").read_text(encoding="utf-8"),
+                          "camera.simulator", width="640")
+    assert re.search(r"lenslet windows of the hexagonal lattice .* leave the frame of shape \(1024, 640\)",
+                     refused(hexagonal))
+
+
+def test_an_auto_lattice_needs_the_simulated_arrays_kind() -> None:
+    text = (ROOT / "config" / "shack-hartmann-hex.toml").read_text(encoding="utf-8")
+    assert load_station_config(ROOT / "config" / "shack-hartmann-hex.toml").lenslets.lattice == "hexagonal"
+    assert re.search(r"\[lenslets\] lattice: the simulated array's kind .* needed when \[shack_hartmann\] "
+                     r"lattice = 'auto'", refused(text.replace('lattice = "hexagonal"', "")))

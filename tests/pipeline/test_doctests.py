@@ -19,6 +19,7 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.aperture.region",  # Aperture.from_mask
     "wavestack.pipeline.fit.build",  # build_fitter
     "wavestack.pipeline.fit.annulus",  # annulus_obscuration
+    "wavestack.pipeline.fit.map_domain",  # map_domain
     "wavestack.pipeline.fit.run_fill",  # fitted_runs, fill_runs
     "wavestack.pipeline.fit.moment_chunks",  # ChunkedPass
     "wavestack.pipeline.fit.run_moments",  # RunPass
@@ -27,6 +28,8 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
     "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice
     "wavestack.pipeline.shack_hartmann.lattice_detection",  # detect_lattice
+    "wavestack.pipeline.shack_hartmann.lit",  # lit_lenslets
+    "wavestack.pipeline.instrument.shack_hartmann",  # ShackHartmannProcessor
     "wavestack.pipeline.formats.fourd",  # read_4d
     "wavestack.pipeline.formats.measured",  # read_measured_map
     "wavestack.pipeline.polishing.tif",  # ToolInfluence
@@ -41,6 +44,16 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.polishing.machine_program",  # MachineProgram
     "wavestack.pipeline.polishing.program",  # plan_program
     "wavestack.pipeline.polishing.program_checks",  # check_program
+    "wavestack.pipeline.surface.tolerance",  # parse_form_tolerance, FormTolerance
+    "wavestack.pipeline.surface.form",  # FormAnalyzer
+    "wavestack.pipeline.surface.radial",  # RadialModel
+    "wavestack.pipeline.surface.robust_pv",  # RobustPVAnalyzer
+    "wavestack.pipeline.surface.psd",  # surface_psd
+    "wavestack.pipeline.surface.power_law",  # fit_power_law
+    "wavestack.pipeline.surface.slope",  # slope_maps
+    "wavestack.pipeline.surface.areal_filter",  # filter_surface, parse_areal_filter
+    "wavestack.pipeline.surface.compliance",  # check_form
+    "wavestack.pipeline.surface.figures",  # SurfaceAnalyzer
 )
 
 

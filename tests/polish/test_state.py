@@ -5,6 +5,8 @@ from __future__ import annotations
 import itertools
 
 import pytest
+
+from wavestack.pipeline.surface import FormFigures, SpecVerdict, check_form, parse_form_tolerance
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -125,3 +127,20 @@ def test_the_floor_is_a_terminal_stop_reached_only_from_solving() -> None:
     stopped = advance(LoopState(P.SOLVING, runs_done=3), E.AT_FLOOR, "floor reached: 6.2 nm")
     assert (stopped.phase, stopped.runs_done, stopped.reason) == (P.FLOOR_REACHED, 3, "floor reached: 6.2 nm")
     assert advance(stopped, E.NEEDS_WORK) == stopped
+
+
+def _verdict(irr_nm: float) -> SpecVerdict:
+    form = FormFigures(sag_nm=100.0, irr_nm=irr_nm, rsi_nm=10.0, rmst_nm=40.0, rmsi_nm=20.0, rmsa_nm=18.0, pv_nm=300.0)
+    return check_form(form, parse_form_tolerance("3/1(0.5/0.2)"))  # IRR limit 136.5 nm
+
+
+def test_with_the_drawing_the_check_stops_when_it_is_met_and_names_the_limiting_quantity() -> None:
+    kw = {"target_rms_nm": 5.0, "max_runs": 3}
+    event, reason = judge_measurement(40.0, None, 0, verdict=_verdict(100.0), **kw)
+    assert event is E.AT_TARGET and "PASS" in reason  # the drawing met: the RMS target does not matter
+    event, reason = judge_measurement(4.0, None, 0, verdict=_verdict(200.0), **kw)
+    assert event is E.NEEDS_WORK and "FAIL, limiting IRR" in reason  # the RMS is met, the drawing is not
+    event, reason = judge_measurement(30.0, 40.0, 3, verdict=_verdict(200.0), **kw)
+    assert event is E.RUNS_EXHAUSTED and "limiting IRR" in reason
+    event, reason = judge_measurement(41.0, 40.0, 1, verdict=_verdict(200.0), **kw)
+    assert event is E.NOT_IMPROVED and "limiting IRR" in reason

@@ -27,7 +27,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from wavestack.pipeline import Centroider, LensletGrid, convert_slopes, slopes
+from wavestack.pipeline import Centroider, LensletLattice, convert_slopes, slopes
 from wavestack.pipeline import ModalReconstructor
 from wavestack.simulators.optic import ApertureShape, OpticSettings, TestOptic
 from wavestack.simulators.spots import LensletArraySettings, SpotRenderer, SpotTruth
@@ -50,14 +50,17 @@ def renderer_for(coefficients, lenslets: LensletArraySettings = LENSLETS, **opti
     return SpotRenderer(TestOptic(settings, HEIGHT, WIDTH), lenslets, HEIGHT, WIDTH)
 
 
-def grid_of(renderer: SpotRenderer) -> LensletGrid:
+def grid_of(renderer: SpotRenderer) -> LensletLattice:
+    """The pipeline's description of the simulated array (written apart from the simulator's)."""
     lenslets = renderer.lenslets
-    return LensletGrid(pitch_px=lenslets.pitch_px, offset_px=lenslets.offset_px, shape=renderer.grid_shape)
+    half = lenslets.pitch_px / 2
+    first = (lenslets.offset_px[0] + half, lenslets.offset_px[1] + half)
+    return LensletLattice.array(lenslets.lattice, lenslets.pitch_px, renderer.grid_shape, first_centre_px=first,
+                                orientation_deg=lenslets.orientation_deg)
 
 
 def measure(renderer: SpotRenderer, frame: np.ndarray, truth: SpotTruth):
-    mask = truth.valid.reshape(renderer.grid_shape)
-    return Centroider.build(grid_of(renderer), frame.shape, mask=mask).measure(frame)
+    return Centroider.build(grid_of(renderer), frame.shape, mask=truth.valid).measure(frame)
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +78,7 @@ def test_gain_from_optics() -> None:
 def test_grid_matches_the_pipeline_grid(aberrated) -> None:
     renderer, frame, truth = aberrated
     assert renderer.grid_shape == (40, 45)  # whole 25 px lenslets from (140, 12) in 1280 x 1024
-    np.testing.assert_array_equal(truth.centres_px, grid_of(renderer).centres().reshape(-1, 2))
+    np.testing.assert_array_equal(truth.centres_px, grid_of(renderer).centres())
     assert frame.shape == (HEIGHT, WIDTH) and frame.dtype == np.uint16
 
 
@@ -166,13 +169,11 @@ def test_dark_and_partial_lenslets() -> None:
     row_starts, col_starts, width = grid.window_starts()
     full = 65535
     for k in np.flatnonzero(truth.fill == 0)[:50]:
-        i, j = divmod(int(k), renderer.grid_shape[1])
-        window = frame[row_starts[i] : row_starts[i] + width, col_starts[j] : col_starts[j] + width]
+        window = frame[row_starts[k] : row_starts[k] + width, col_starts[k] : col_starts[k] + width]
         assert window.max() < (0.02 + 6 * 0.0005) * full
     # a fully lit spot peaks near 0.5 FS above the background (pixel integration lowers the peak)
     k = int(np.flatnonzero(truth.fill == 1.0)[0])
-    i, j = divmod(k, renderer.grid_shape[1])
-    window = frame[row_starts[i] : row_starts[i] + width, col_starts[j] : col_starts[j] + width]
+    window = frame[row_starts[k] : row_starts[k] + width, col_starts[k] : col_starts[k] + width]
     assert 0.3 * full < window.max() - 0.02 * full < 0.5 * full
 
 

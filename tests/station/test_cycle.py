@@ -26,12 +26,13 @@ from wavestack.station import (
     ReconstructorDiagnostics,
     SentCommand,
     SetCounts,
-    SlopeOutcome,
     StationResult,
     make_result,
     start_up_hold,
     with_output,
 )
+
+from wavestack.pipeline.instrument import SlopeOutcome  # noqa: E402
 
 FRAMES = (Frame(7, 1_000_000_000, 0, np.zeros((2, 2), np.uint16), {}),
           Frame(8, 1_010_000_000, 0, np.zeros((2, 2), np.uint16), {}))

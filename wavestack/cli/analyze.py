@@ -21,11 +21,14 @@ from wavestack.cli.arguments import finite_float, positive_finite_float, wavelen
 from wavestack.cli.fit import MODES_ARGUMENT, fit_view
 from wavestack.figures import write_fit_figure
 from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
+from wavestack.cli.surface_options import add_surface_arguments, measure_surface, surface_lines, surface_request
+from wavestack.cli.surface_options import wants_surface
 from wavestack.cli.command import Command
 from wavestack.cli.measured_map import ANALYZE_FLAGS, MapPixels, add_fit_method_argument, advised, fit_mask_of
 from wavestack.cli.measured_map import obscuration_report
 from wavestack.cli.measured_map import map_lines, map_report, read_map_wavefront, reject_unsupported
-from wavestack.pipeline import Aperture, IllConditionedBasis, InputError, available_methods, build_fitter
+from wavestack.pipeline import Aperture, IllConditionedBasis, InputError, SurfaceFigures, available_methods
+from wavestack.pipeline import Pupil, build_fitter
 from wavestack.pipeline import ConicTest, implied_conic_constant, null_wavefront_waves
 from wavestack.pipeline import read_frame, read_frame_set
 from wavestack.pipeline import MeasuredWavefront, wavefront_from_carrier, wavefront_from_phase_shifts
@@ -68,7 +71,11 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--save-map", metavar="OUT.npy", help="save the analysed wavefront (waves, NaN outside)")
     parser.add_argument("--plot", metavar="OUT.png",
                         help="draw the measured, fitted and residual maps and the coefficients (PNG)")
+    parser.add_argument("--surface-factor", type=positive_finite_float, default=0.5, metavar="F",
+                        help="interferograms: surface height per wavefront for the surface figures (0.5: a "
+                             "surface in reflection at normal incidence; a measured map is already surface)")
     add_aperture_arguments(parser)
+    add_surface_arguments(parser)
     add_shack_hartmann_arguments(parser)
 
 
@@ -147,7 +154,6 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         report["steps_estimated"] = measured.method in ("aia", "pca")
     if measured.carrier is not None:
         report["carrier_cycles_per_px"] = list(measured.carrier)
-
     tick = time.perf_counter()
     if test is not None:
         waves = _apply_null_test(args, test, aperture, waves, report)
@@ -183,10 +189,31 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if result.removed is not None:
         report["removed"] = result.removed.as_dict()
     map_report(report, pixels, result.valid_count)
+    surface, report["surface"] = _surface_figures(args, measured, waves, wavelength_nm, pixels, fitter.basis.pupil)
     if plot_to is not None:
-        write_fit_figure(fit_view(_subject(args), "waves", fitter, result), plot_to)
+        write_fit_figure(fit_view(_subject(args), "waves", fitter, result, surface), plot_to)
     print(json_text(report) if args.json else _format(report))
     return 0
+
+
+def _surface_figures(args: argparse.Namespace, measured: MeasuredWavefront, waves: np.ndarray, wavelength_nm: float,
+                     pixels: MapPixels | None, pupil: Pupil) -> tuple[SurfaceFigures | None, dict[str, Any]]:
+    """The surface figures of the analysed map: nm of surface on its measured pixels (before ``--remove``).
+
+    A measured map's nanometres are already the instrument's surface; an interferogram's wavefront
+    becomes surface by ``--surface-factor``. The pixel pitch is ``--pixel-mm``, else the file's,
+    else ``--diameter-mm`` over the pupil's diameter in pixels.
+    """
+    factor = 1.0 if measured.method == "file" else args.surface_factor
+    valid = np.isfinite(waves) & measured.aperture.mask
+    pixel_mm = args.pixel_mm
+    if pixel_mm is None and pixels is not None:
+        pixel_mm = pixels.pitch_mm
+    if pixel_mm is None and args.diameter_mm is not None:
+        pixel_mm = args.diameter_mm / (2.0 * pupil.radius)
+    surface_nm = np.where(valid, waves * wavelength_nm * factor, np.nan)
+    return measure_surface(_subject(args), surface_nm, valid, surface_request(args), pixel_mm,
+                           asked=wants_surface(args))
 
 
 def _spot_image(args: argparse.Namespace) -> int:
@@ -197,6 +224,9 @@ def _spot_image(args: argparse.Namespace) -> int:
     if args.plot is not None:
         raise InputError(f"{args.files[0]}: --plot draws interferograms and measured maps, not a "
                          "Shack-Hartmann spot image; expected --plot without the Shack-Hartmann options")
+    if wants_surface(args):
+        raise InputError(f"{args.files[0]}: the surface figures (--spec, --psd, --slope-length-mm, --filter) apply to "
+                         "interferograms and measured maps, not to a Shack-Hartmann spot image")
     return run_shack_hartmann(args)
 
 
@@ -217,6 +247,7 @@ def _format(report: dict[str, Any]) -> str:
         f"PV {report['pv_waves']:.4f} waves ({report['pv_nm']:.1f} nm) at {report['wavelength_nm']} nm",
     ]
     lines += map_lines(report)
+    lines += surface_lines(report["surface"])
     if "implied_conic" in report:
         lines.append(f"conic       measured Z11 {report['measured_spherical_waves']:.4f} waves implies K = {report['implied_conic']:.3f}"
                      + (f"; null for K = {report['null_conic']} subtracted" if "null_conic" in report else ""))

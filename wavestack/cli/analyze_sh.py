@@ -1,17 +1,16 @@
-"""``wavestack analyze`` on a Shack-Hartmann spot image: lenslet lattice, spots, slopes, Zernike terms.
+"""``wavestack analyze`` on a Shack-Hartmann spot image: the station's processor applied to a file.
 
-One spot image and either a reference image (a flat wavefront: the slopes are the spot
-displacements against the reference's spots) or a lenslet description (pitch, focal length,
-pixel size: the lenslet centres are the lattice found in the image, at the described pitch).
-The lattice, square or hexagonal, is found from the spots
-(:func:`~wavestack.pipeline.shack_hartmann.detect_lattice`); the spots are centroided in their
-lenslet windows, turned into slopes (``displacement * pixel / focal length``) and into Zernike
-terms by modal least squares over the pupil disk
-(:class:`~wavestack.pipeline.shack_hartmann.ModalReconstructor`).
+One spot image goes through the one Shack-Hartmann signal path,
+:class:`~wavestack.pipeline.instrument.ShackHartmannProcessor`, described either
 
-Without a reference the absolute lenslet positions on the camera are unknown: the lattice is
-placed on the spots, so the mean spot displacement (the tilt) is not measured and tilt is
-reported as null; defocus shows as the spots' pitch against the described one.
+* by a station file (``--config STATION.toml``): its ``[shack_hartmann]`` table exactly as the
+  live station applies it (the processor :func:`~wavestack.station.build_processor` builds), so
+  a frame recorded by ``wavestack run --record`` gives the same coefficients here; or
+* by a reference image (``--reference``: a flat wavefront; the lattice, square or hexagonal, is
+  found in it and the slopes are the spot displacements against its spots); or
+* by the lenslet pitch (``--lenslet-pitch-um``: the lattice found in the image at that pitch,
+  placed on its spots, so the mean spot displacement, the tilt, is not measured and reported as
+  null; defocus shows as the spots' pitch against the described one).
 """
 
 from __future__ import annotations
@@ -24,20 +23,26 @@ import numpy as np
 
 from wavestack.cli.arguments import positive_finite_float
 from wavestack.cli.outputs import json_text
+from wavestack.config import load_station_config
 from wavestack.pipeline import InputError, mode_list, mode_name, normalisation_factor, default_normalisation
 from wavestack.pipeline import read_frame
-from wavestack.pipeline.shack_hartmann import (
-    Centroider, LensletLattice, ModalReconstructor, SpotMeasurement, convert_slopes, detect_lattice, slopes,
-)
+from wavestack.pipeline.instrument import ShackHartmannProcessor, ShackHartmannSetup, SlopeOutcome
+from wavestack.station import build_processor
 
-_PITCH_AGREEMENT = 0.2  # the spots' pitch and the described one may differ by this fraction (defocus)
-_LIT_FRACTION = 0.25  # a spot dimmer than this fraction of the median reference spot is not used
 _TILTS = ((1, -1), (1, 1))
+#: The lit fraction of a spot image described on the command line: a real sensor's beam is rarely
+#: even (a Gaussian beam leaves the outer lenslets at a fraction of the centre's light), while
+#: 0.25 still drops a lenslet three quarters in the shadow. A station file sets its own.
+LIT_FRACTION = 0.25
 
 
 def add_shack_hartmann_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the Shack-Hartmann options of ``wavestack analyze``."""
-    group = parser.add_argument_group("Shack-Hartmann spot images (one FILE; a reference or a lenslet pitch)")
+    group = parser.add_argument_group("Shack-Hartmann spot images (one FILE; a station file, a reference or a "
+                                      "lenslet pitch)")
+    group.add_argument("--config", metavar="STATION.toml",
+                       help="a Shack-Hartmann station's file: FILE is processed as the live station processes "
+                            "its frames ([shack_hartmann], wavelength, modes)")
     group.add_argument("--reference", metavar="REF", help="spot image of a flat wavefront: slopes are the spot "
                                                           "displacements against its spots")
     group.add_argument("--lenslet-pitch-um", type=positive_finite_float, metavar="P",
@@ -47,12 +52,15 @@ def add_shack_hartmann_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--pixel-um", type=positive_finite_float, metavar="S", help="camera pixel size, um")
     group.add_argument("--pupil-px", metavar="CX,CY,R", type=_pupil_argument,
                        help="Zernike disk in pixels (CX column, CY row); default: the disk the used lenslets cover")
+    group.add_argument("--lit-fraction", type=_fraction_argument, metavar="F",
+                       help=f"a lenslet counts when its spot holds this fraction of a typical full spot (the 90th "
+                            f"percentile; default {LIT_FRACTION}: a beam's uneven illumination keeps its lenslets)")
 
 
 def requested(args: argparse.Namespace) -> bool:
     """True when the options ask for Shack-Hartmann analysis."""
     return any(getattr(args, name, None) is not None
-               for name in ("reference", "lenslet_pitch_um", "focal_length_mm", "pixel_um"))
+               for name in ("config", "reference", "lenslet_pitch_um", "focal_length_mm", "pixel_um"))
 
 
 def _pupil_argument(text: str) -> tuple[float, float, float]:
@@ -65,15 +73,32 @@ def _pupil_argument(text: str) -> tuple[float, float, float]:
     return cx, cy, radius
 
 
+def _fraction_argument(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a fraction in [0, 1], got {text!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a fraction in [0, 1], got {text!r}")
+    return value
+
+
 def run_shack_hartmann(args: argparse.Namespace) -> int:
     """Execute ``wavestack analyze`` on a spot image; returns the exit status."""
     path = _check_options(args)
     frame = read_frame(path)
+    reference = None
     if args.reference is not None:
-        lattice, reference, spots = _against_reference(path, frame, args)
-    else:
-        lattice, reference, spots = _against_description(path, frame, args)
-    report = _reconstruct(path, lattice, reference, spots, args)
+        reference = read_frame(Path(args.reference))
+        if reference.shape != frame.shape:
+            raise InputError(f"{args.reference}: reference image of shape {reference.shape}; expected the spot "
+                             f"image's shape {frame.shape}")
+    processor = _processor(path, args, reference)
+    outcome = processor.process([frame])
+    if not outcome.valid:
+        blamed = args.reference if outcome.reason.startswith("lattice:") and args.reference is not None else path
+        raise InputError(f"{blamed}: {outcome.reason.split(': ', 1)[-1]}")
+    report = _report(path, processor.setup, outcome, args)
     print(json_text(report) if args.json else _format(report))
     return 0
 
@@ -84,127 +109,74 @@ def _check_options(args: argparse.Namespace) -> Path:
         raise InputError(f"{args.files[0]}: a Shack-Hartmann analysis takes one spot image; got {len(args.files)} "
                          f"files (the reference goes to --reference)")
     path = Path(args.files[0])
+    if args.config is not None:
+        described = [option for option, value in (("--reference", args.reference), ("--pupil-px", args.pupil_px),
+                                                  ("--lenslet-pitch-um", args.lenslet_pitch_um),
+                                                  ("--focal-length-mm", args.focal_length_mm),
+                                                  ("--pixel-um", args.pixel_um),
+                                                  ("--lit-fraction", args.lit_fraction)) if value is not None]
+        if described:
+            raise InputError(f"{path}: --config describes the sensor; {described[0]} cannot be combined with it")
+        return path
     for option, value in (("--wavelength-nm", args.wavelength_nm), ("--focal-length-mm", args.focal_length_mm),
                           ("--pixel-um", args.pixel_um)):
         if value is None:
             raise InputError(f"{path}: {option} is required for a Shack-Hartmann spot image")
     if args.reference is None and args.lenslet_pitch_um is None:
-        raise InputError(f"{path}: a Shack-Hartmann spot image needs --reference REF or --lenslet-pitch-um")
+        raise InputError(f"{path}: a Shack-Hartmann spot image needs --config STATION.toml, --reference REF or "
+                         f"--lenslet-pitch-um")
     if not args.wavelength_nm > 0:
         raise InputError(f"{path}: --wavelength-nm must be > 0, got {args.wavelength_nm}")
     return path
 
 
-def _lattice_of(path: Path, frame: np.ndarray) -> LensletLattice:
+def _processor(path: Path, args: argparse.Namespace, reference: np.ndarray | None) -> ShackHartmannProcessor:
+    """The station's own processor (``--config``), or one for the lenslets the options describe."""
+    if args.config is not None:
+        config = load_station_config(args.config)
+        if config.station.kind != "shack-hartmann":
+            raise InputError(f"{args.config}: [station] kind = '{config.station.kind}'; analyze --config with a "
+                             f"spot image expects a Shack-Hartmann station file (kind = 'shack-hartmann')")
+        processor = build_processor(config)
+        assert isinstance(processor, ShackHartmannProcessor)
+        return processor
     try:
-        return detect_lattice(frame)
-    except ValueError as error:
-        raise InputError(f"{path}: {str(error).removeprefix('frame: ')}") from None
-
-
-def _against_reference(path: Path, frame: np.ndarray, args: argparse.Namespace
-                       ) -> tuple[LensletLattice, SpotMeasurement, SpotMeasurement]:
-    """The lattice of the reference image, its spots (the reference positions) and the image's spots."""
-    reference_path = Path(args.reference)
-    reference = read_frame(reference_path)
-    if reference.shape != frame.shape:
-        raise InputError(f"{reference_path}: reference image of shape {reference.shape}; expected the spot "
-                         f"image's shape {frame.shape}")
-    lattice = _lattice_of(reference_path, reference)
-    if args.lenslet_pitch_um is not None:
-        _check_pitch(reference_path, lattice, args)
-    centroider = Centroider.build(lattice, frame.shape)
-    return lattice, centroider.measure(reference), centroider.measure(frame)
-
-
-def _against_description(path: Path, frame: np.ndarray, args: argparse.Namespace
-                         ) -> tuple[LensletLattice, SpotMeasurement, SpotMeasurement]:
-    """The lattice found in the image at the described pitch (origin on the spots), its centres, the spots."""
-    found = _lattice_of(path, frame)
-    _check_pitch(path, found, args)
-    scale = args.lenslet_pitch_um / args.pixel_um / found.pitch_px
-    basis = np.asarray(found.basis_px) * scale
-    spots = Centroider.build(found, frame.shape).measure(frame)
-    used = spots.valid
-    # the origin that puts the described lattice on the spots in the least-squares sense (the mean tilt)
-    origin = np.mean(spots.centroids[used] - found.sites[used] @ basis, axis=0)
-    lattice = LensletLattice(found.kind, tuple(map(tuple, basis)), tuple(origin), found.sites)
-    try:
-        lattice.check_fits(frame.shape)
+        setup = ShackHartmannSetup(
+            focal_length_um=args.focal_length_mm * 1e3, pixel_um=args.pixel_um, wavelength_nm=args.wavelength_nm,
+            pitch_px=None if args.lenslet_pitch_um is None else args.lenslet_pitch_um / args.pixel_um,
+            reference="ideal" if reference is None else "frame", pupil_px=args.pupil_px, modes=args.modes,
+            ordering=args.ordering, lit_fraction=LIT_FRACTION if args.lit_fraction is None else args.lit_fraction)
     except ValueError as error:
         raise InputError(f"{path}: {error}") from None
-    centroider = Centroider.build(lattice, frame.shape)
-    centres = lattice.centres()
-    ideal = SpotMeasurement(centres, np.full(lattice.count, np.inf), np.ones(lattice.count, dtype=bool))
-    return lattice, ideal, centroider.measure(frame)
+    return ShackHartmannProcessor(setup, reference_frame=reference)
 
 
-def _check_pitch(path: Path, lattice: LensletLattice, args: argparse.Namespace) -> None:
-    described = args.lenslet_pitch_um / args.pixel_um
-    if abs(lattice.pitch_px / described - 1.0) > _PITCH_AGREEMENT:
-        raise InputError(f"{path}: the spots are {lattice.pitch_px:.2f} px apart; --lenslet-pitch-um / --pixel-um "
-                         f"give {described:.2f} px (expected within {_PITCH_AGREEMENT:.0%})")
-
-
-def _used_lenslets(path: Path, reference: SpotMeasurement, spots: SpotMeasurement) -> np.ndarray:
-    """Lenslets with a spot in both images, none much dimmer than the typical reference spot
-    (the image's own typical spot when the reference is the ideal lattice)."""
-    typical = reference.intensity[reference.valid & np.isfinite(reference.intensity)]
-    if typical.size == 0:
-        typical = spots.intensity[spots.valid]
-    floor = _LIT_FRACTION * float(np.median(typical)) if typical.size else np.inf
-    used = reference.valid & spots.valid & (spots.intensity >= floor)
-    if not used.any():
-        raise InputError(f"{path}: no spots in the lenslet windows; expected a Shack-Hartmann spot image")
-    return used
-
-
-def _pupil(lattice: LensletLattice, used: np.ndarray, given: tuple[float, float, float] | None
-           ) -> tuple[float, float, float]:
-    """The Zernike disk (col, row, radius), pixels: given, or about the used lenslets out to their edge."""
-    if given is not None:
-        return given
-    centres = lattice.centres()[used]
-    cx, cy = centres.mean(axis=0)
-    return float(cx), float(cy), float(np.hypot(*(centres - (cx, cy)).T).max() + 0.5 * lattice.pitch_px)
-
-
-def _reconstruct(path: Path, lattice: LensletLattice, reference: SpotMeasurement, spots: SpotMeasurement,
-                 args: argparse.Namespace) -> dict[str, Any]:
-    used = _used_lenslets(path, reference, spots)
-    wavelength_um = args.wavelength_nm * 1e-3
-    measured = SpotMeasurement(spots.centroids, spots.intensity, used)
-    result = slopes(measured, reference, args.focal_length_mm * 1e3, args.pixel_um)
-    sx, sy = convert_slopes(result, wavefront_unit_um=wavelength_um, length_unit_um=args.pixel_um)
-    cx, cy, radius = _pupil(lattice, result.valid, args.pupil_px)
-    modes = mode_list(args.ordering, args.modes)
-    try:
-        reconstructor = ModalReconstructor.for_circle(lattice.centres_xy(), (cx, -cy), radius, modes, result.valid)
-    except ValueError as error:
-        raise InputError(f"{path}: {error}") from None
-    rms_coefficients = reconstructor.reconstruct(sx, sy)
-    model_x, model_y = reconstructor.predict(rms_coefficients)
-    misfit = np.concatenate([sx - model_x, sy - model_y])[np.concatenate([result.valid, result.valid])]
-    tilt_measured = args.reference is not None
-    reported = _reported(rms_coefficients, modes, args, tilt_measured)
-    normalisation = default_normalisation(args.ordering)
+def _report(path: Path, setup: ShackHartmannSetup, outcome: SlopeOutcome, args: argparse.Namespace
+            ) -> dict[str, Any]:
+    assert outcome.coefficients_waves is not None and outcome.lenslets is not None and outcome.pupil_px is not None
+    modes = mode_list(setup.ordering, setup.modes)
+    reported = _reported(outcome.coefficients_waves, modes, args, outcome.tilt_measured)
+    normalisation = default_normalisation(setup.ordering)
     factors = np.array([normalisation_factor(n, m, "rms") / normalisation_factor(n, m, normalisation)
                         for n, m in modes])
     waves = [None if value is None else float(value * factor) for value, factor in zip(reported, factors)]
     known = np.array([0.0 if value is None else value for value in reported])
     rms = float(np.sqrt(np.sum(known[1:] ** 2)))  # orthonormal unit-RMS terms: RMS over the disk
+    lattice, lenslets = outcome.lenslets.lattice, outcome.lenslets
+    misfit_waves = outcome.residual_rms / lattice.pitch_px  # the slope misfit, waves per pixel
     return {
-        "files": [str(path)], "method": "shack-hartmann", "reference": args.reference,
+        "files": [str(path)], "method": "shack-hartmann", "reference": args.reference, "config": args.config,
         "lattice": {"kind": lattice.kind, "pitch_px": lattice.pitch_px, "orientation_deg": lattice.orientation_deg,
                     "origin": list(lattice.origin_px), "lenslets": lattice.count},
-        "used_lenslets": int(result.valid.sum()), "pupil": [cx, cy, radius], "tilt_measured": tilt_measured,
-        "wavelength_nm": args.wavelength_nm, "modes": len(modes), "ordering": args.ordering,
-        "first_index": 0 if args.ordering == "ansi" else 1, "normalisation": normalisation,
-        "mode_indices": [list(mode) for mode in modes], "coefficients_waves": waves,
-        "coefficients_nm": [None if w is None else w * args.wavelength_nm for w in waves],
-        "rms_waves": rms, "rms_nm": rms * args.wavelength_nm,
-        "slope_residual_rms_waves_per_px": float(np.sqrt(np.mean(misfit**2))),
-        "condition": reconstructor.condition,
+        "used_lenslets": int(lenslets.lit.sum()), "pupil": list(outcome.pupil_px),
+        "tilt_measured": outcome.tilt_measured, "wavelength_nm": setup.wavelength_nm, "modes": len(modes),
+        "ordering": setup.ordering, "first_index": 0 if setup.ordering == "ansi" else 1,
+        "normalisation": normalisation, "mode_indices": [list(mode) for mode in modes], "coefficients_waves": waves,
+        "coefficients_nm": [None if w is None else w * setup.wavelength_nm for w in waves],
+        "rms_waves": rms, "rms_nm": rms * setup.wavelength_nm,
+        "slope_residual_rms_waves_per_px": misfit_waves, "residual_rms_waves": outcome.residual_rms,
+        "residual_pv_waves": outcome.residual_pv,
+        "condition": outcome.diagnostics.condition if outcome.diagnostics is not None else None,
     }
 
 

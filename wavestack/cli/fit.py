@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -14,6 +15,8 @@ from wavestack.cli.example import synthetic_example
 from wavestack.cli.measured_map import FIT_FLAGS, add_fit_method_argument, advised, obscuration_lines
 from wavestack.cli.measured_map import obscuration_report
 from wavestack.cli.outputs import check_output_file, json_text, require_finite, save_npy
+from wavestack.cli.surface_options import add_surface_arguments, measure_surface, surface_lines, surface_request
+from wavestack.cli.surface_options import wants_surface
 from wavestack.figures import FitView, write_fit_figure
 from wavestack.pipeline import (
     Aperture,
@@ -24,9 +27,12 @@ from wavestack.pipeline import (
     Pupil,
     available_methods,
     build_fitter,
+    SurfaceFigures,
     load_map,
     load_mask,
+    read_measured_map,
 )
+from wavestack.pipeline.formats import MEASURED_MAP_SUFFIXES
 from wavestack.pipeline import mode_name
 from wavestack.pipeline.fit import AUTO_MAX_NOISE_GAIN, MAX_MODES
 from wavestack.pipeline.mapping import MAX_TARGET_VERTICES
@@ -88,20 +94,58 @@ def add_fit_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--save-fit", metavar="OUT.npy", help="save the fitted map (NaN outside)")
     parser.add_argument("--plot", metavar="OUT.png",
                         help="draw the measured, fitted and residual maps and the coefficients (PNG)")
+    parser.add_argument("--map-unit", choices=("nm", "um"),
+                        help="a .npy map's unit of surface height, for the surface figures (an instrument file "
+                             "is in nm)")
+    add_surface_arguments(parser)
 
 
-def _load_inputs(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str, np.ndarray | None]:
+@dataclass(frozen=True, eq=False)
+class _Inputs:
+    """What ``fit`` reads: the map, its mask, its name, the example's truth, its surface scale and pitch."""
+
+    wavefront: np.ndarray
+    mask: np.ndarray
+    source: str
+    truth: np.ndarray | None = None
+    nm_per_unit: float | None = None  # None: the map's unit is not a known surface height
+    pixel_mm: float | None = None
+
+
+def _load_inputs(args: argparse.Namespace) -> _Inputs:
     if args.example:
         example = synthetic_example()
-        return example.wavefront, example.mask, example.description, example.truth
-    wavefront = load_map(args.wavefront)
+        return _Inputs(example.wavefront, example.mask, example.description, example.truth)
+    pixel_mm = None
+    if str(args.wavefront).lower().endswith(MEASURED_MAP_SUFFIXES):
+        measured = read_measured_map(args.wavefront)
+        wavefront, nm_per_unit = np.array(measured.map_nm), 1.0
+        if measured.pixel_size_m and measured.pixel_size_m > 0:
+            pixel_mm = measured.pixel_size_m * 1e3
+    else:
+        wavefront = load_map(args.wavefront)
+        nm_per_unit = {"nm": 1.0, "um": 1e3, None: None}[args.map_unit]
     if args.mask:
         mask = load_mask(args.mask, shape=wavefront.shape)
         if not mask.any():
             raise InputError(f"{args.mask}: the mask has no valid pixel")
     else:
         mask = np.isfinite(wavefront)
-    return wavefront, mask, args.wavefront, None
+    return _Inputs(wavefront, mask, args.wavefront, None, nm_per_unit, args.pixel_mm or pixel_mm)
+
+
+def _surface_figures(args: argparse.Namespace, inputs: _Inputs) -> tuple[SurfaceFigures | None, dict[str, Any] | None]:
+    """The surface figures of the map as given (before ``--remove``), when its unit is a known height."""
+    if inputs.nm_per_unit is None:
+        if wants_surface(args):
+            what = "the bundled example is a wavefront in waves" if args.example else "a .npy map has no unit"
+            raise InputError(f"the surface figures need a surface height map and {what}; "
+                             "expected --map-unit nm or um (or an instrument file)")
+        return None, None
+    valid = inputs.mask & np.isfinite(inputs.wavefront)
+    surface_nm = np.where(valid, inputs.wavefront * inputs.nm_per_unit, np.nan)
+    return measure_surface(inputs.source, surface_nm, valid, surface_request(args), inputs.pixel_mm,
+                           asked=wants_surface(args))
 
 
 def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -110,7 +154,8 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         raise InputError("--mask cannot be combined with --example; expected one of them")
     save_to = check_output_file(args.save_fit, "--save-fit") if args.save_fit else None
     plot_to = check_output_file(args.plot, "--plot") if args.plot else None
-    wavefront, mask, source, truth = _load_inputs(args)
+    inputs = _load_inputs(args)
+    wavefront, mask, source, truth = inputs.wavefront, inputs.mask, inputs.source, inputs.truth
     try:
         fitter = build_fitter(
             Aperture.from_mask(mask),
@@ -139,8 +184,11 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         truth_view = truth if args.remove is None else truth - (wavefront - result.residual_map - fitted)
         truth_error = float(np.sqrt(np.nanmean((fitted - truth_view) ** 2)))
     report = fit_report(source, fitter, result, fit_seconds, truth_error)
+    surface, surface_report = _surface_figures(args, inputs)
+    if surface_report is not None:
+        report["surface"] = surface_report
     if plot_to is not None:
-        write_fit_figure(fit_view(source, _map_unit(args), fitter, result), plot_to)
+        write_fit_figure(fit_view(source, _map_unit(args), fitter, result, surface), plot_to)
     if args.json:
         print(json_text(report))
     else:
@@ -149,19 +197,23 @@ def run_fit(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 
 
 def _map_unit(args: argparse.Namespace) -> str:
-    """The unit of the fitted map: waves (the example), nm (an instrument file) or unknown (.npy)."""
+    """The unit of the fitted map: waves (the example), nm (an instrument file), ``--map-unit`` or unknown (.npy)."""
     if args.example:
         return "waves"
-    return "map units" if str(args.wavefront).lower().endswith(".npy") else "nm"
+    if str(args.wavefront).lower().endswith(".npy"):
+        return args.map_unit or "map units"
+    return "nm"
 
 
-def fit_view(source: str, unit: str, fitter: Fitter, result: FitResult) -> FitView:
-    """What ``--plot`` draws of a fit made with ``residual=True``: the map less removed terms, the fit, the residual."""
+def fit_view(source: str, unit: str, fitter: Fitter, result: FitResult,
+             surface: SurfaceFigures | None = None) -> FitView:
+    """What ``--plot`` draws of a fit made with ``residual=True``: the map less removed terms, the fit, the
+    residual, and the surface figures' PSD, slope and filtered panels when they were measured."""
     fitted = fitter.surface(result.coefficients)
     return FitView(measured=result.residual_map + fitted, fitted=fitted, residual=result.residual_map,
                    coefficients=result.coefficients, modes=tuple(fitter.basis.modes),
                    first_index=fitter.basis.first_index, unit=unit, source=source, method=fitter.basis.method,
-                   removed=fitter.removal)
+                   removed=fitter.removal, surface=surface)
 
 
 def fit_report(
@@ -237,6 +289,8 @@ def format_report(report: dict[str, Any]) -> str:
             f"removed     piston {removed['piston']:.4g}, tilt x {removed['tilt_x']:.4g}, "
             f"tilt y {removed['tilt_y']:.4g}{power} (at radius {removed['radius_px']:.1f} px)"
         )
+    if "surface" in report:
+        lines += surface_lines(report["surface"])
     lines.append("")
     lines.append(f"{'j':>4}  {'(n, m)':>9}  {'name':<24} {'coefficient':>13}")
     for offset, ((n, m), value) in enumerate(zip(report["mode_indices"], report["coefficients"])):

@@ -39,11 +39,14 @@ class MapPixels:
     outside_outline : int
         Measured pixels the outline detection alone would have cut (isolated pixels, rim
         spurs); they are fitted and inside the reported aperture.
+    pitch_mm : float or None
+        The file's pixel pitch (lateral resolution), mm; None when it does not say.
     """
 
     measured: int
     dropouts: int
     outside_outline: int
+    pitch_mm: float | None = None
 
     def as_dict(self, fitted: int) -> dict[str, int]:
         """JSON form, with the count of pixels that entered the fit."""
@@ -92,15 +95,20 @@ def read_map_wavefront(path: Path, wavelength_nm: float | None) -> tuple[Measure
         raise InputError(f"{path}: the file gives no wavelength; expected --wavelength-nm")
     valid = np.asarray(data.valid)
     # the outline: the detected aperture (drop-outs filled) joined with every measured pixel
-    detected = detect_aperture(valid.astype(np.float64), DetectionSettings(threshold=0.5)).aperture.mask
+    settings = DetectionSettings(threshold=0.5)
+    detected = detect_aperture(valid.astype(np.float64), settings).aperture.mask
     outline = detected | valid
     pixels = MapPixels(
         measured=int(valid.sum()),
         dropouts=int(np.count_nonzero(outline & ~valid)),
         outside_outline=int(np.count_nonzero(valid & ~detected)),
+        pitch_mm=data.pixel_size_m * 1e3 if data.pixel_size_m and data.pixel_size_m > 0 else None,
     )
     waves = np.where(valid, data.map_nm / wavelength, np.nan)
-    measured = MeasuredWavefront(waves=waves, aperture=Aperture.from_mask(outline), method="file", aperture_choice="file",
+    # a hole the join leaves (a drop-out next to the edge, which the opening cut open) is a drop-out too:
+    # holes count as obscurations from the detection's own drop-out size on
+    aperture = Aperture.from_mask(outline, min_hole_area_px=settings.fill_dropouts_below_px)
+    measured = MeasuredWavefront(waves=waves, aperture=aperture, method="file", aperture_choice="file",
                                  timings={"read": time.perf_counter() - tick})
     return measured, wavelength, pixels
 

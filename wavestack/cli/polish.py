@@ -30,6 +30,7 @@ from wavestack.cli.signals import stop_on_signals
 from wavestack.cli.web_view import add_web_arguments, chain, open_web_view
 from wavestack.config.polishing import load_polishing_config
 from wavestack.pipeline import InputError
+from wavestack.cli.surface_options import tolerance_argument
 from wavestack.polish.loop import CampaignSummary, LoopOptions, PolishingLoop
 from wavestack.polish.recorder import CampaignRecorder
 from wavestack.polish.run_record import RunRecord, run_line
@@ -58,6 +59,9 @@ def add_polish_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, help="polishing station TOML (default: the simulated station)")
     parser.add_argument("--target-rms-nm", type=_non_negative_float, metavar="X",
                         help="stop once the surface RMS is at most X nm (default: [polishing] target_rms_nm)")
+    parser.add_argument("--spec", type=tolerance_argument, metavar="TOLERANCE",
+                        help="the drawing's form tolerance, e.g. '3/1(0.25/0.1)' (ISO 10110-5, fringes at 546.07 nm "
+                             "unless 'lambda = ... nm' follows): stop when the surface meets it, not on the RMS")
     parser.add_argument("--max-runs", type=positive_int, metavar="N", help="most polishing runs (default: config)")
     parser.add_argument("--solver", choices=("fft", "lsq", "bounded"), help="dwell solver (default: [polishing] solver)")
     parser.add_argument("--json", action="store_true", help="one JSON object per run, then a summary")
@@ -86,6 +90,10 @@ class _Printer:
         trend = " -> ".join(f"{rms:.2f}" for rms in summary.rms_nm) or "none"
         self._write(f"{summary.state.phase.value} after {summary.state.runs_done} run(s): {summary.state.reason}")
         self._write(f"surface RMS per measurement (nm): {trend}")
+        if summary.verdict is not None:
+            checks = "; ".join(f"{c.quantity} {'pass' if c.passed else 'FAIL'} ({100 * c.ratio:.0f} % of its limit)"
+                               for c in summary.verdict.checks)
+            self._write(f"drawing {summary.verdict.summary()}: {checks}")
 
     def _write(self, line: str) -> None:
         self._stream.write(line + "\n")
@@ -100,7 +108,8 @@ def run_polish(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     config = load_polishing_config(args.config)
     settings = config.polishing
     options = LoopOptions(target_rms_nm=settings.target_rms_nm if args.target_rms_nm is None else args.target_rms_nm,
-                          max_runs=args.max_runs or settings.max_runs, solver=args.solver or settings.solver)
+                          max_runs=args.max_runs or settings.max_runs, solver=args.solver or settings.solver,
+                          spec=args.spec)
     printer = _Printer(sys.stdout, args.json)
     stop = threading.Event()
     with ExitStack() as stack, stop_on_signals(stop):

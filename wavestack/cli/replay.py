@@ -73,7 +73,7 @@ def _line(item: ReplayedResult | SkippedSet) -> str:
         return f"set {item.index} (recorded set {item.position}): not replayed, damaged"
     p = item.processed
     state = "valid" if p.valid else f"invalid ({p.reason})"
-    fitter = p.choice.kind if p.choice else (p.fitter_kind or "-")
+    fitter = p.fitter_kind or "-"
     diff = "" if item.difference_rms is None else f", differs from the recording by {item.difference_rms:.2e} waves rms"
     if item.residual_pv_difference is not None:
         diff += f", residual pv {p.residual_pv:.4f} waves ({item.residual_pv_difference:+.2e})"

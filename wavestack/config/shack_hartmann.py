@@ -2,25 +2,32 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Literal
 
 from wavestack.config.schema import setting
-from wavestack.pipeline import LensletGrid
+from wavestack.pipeline.instrument import ShackHartmannSetup
 
 
 @dataclass(frozen=True)
 class ShackHartmannSettings:
-    """``[shack_hartmann]``: the sensor's geometry and how its spots become coefficients."""
+    """``[shack_hartmann]``: the sensor's geometry and how its spots become coefficients.
+
+    :meth:`setup` gives the processor's view of it
+    (:class:`~wavestack.pipeline.instrument.ShackHartmannSetup`, where the fields are explained).
+    """
 
     pitch_px: float = setting(minimum=4.0, maximum=4096.0, doc="lenslet pitch on the camera, pixels")
     focal_length_um: float = setting(minimum=1.0, maximum=1e6, doc="lenslet focal length, micrometres")
     pixel_um: float = setting(minimum=0.1, maximum=1000.0, doc="camera pixel pitch, micrometres")
     pupil_centre_px: tuple[float, float] = setting(doc="(col, row) of the pupil centre on the camera, pixels")
     pupil_radius_px: float = setting(minimum=1.0, maximum=1e5, doc="pupil radius on the camera, pixels")
+    lattice: Literal["square", "hexagonal", "auto"] = setting(
+        "square", doc="lenslet array: square, hexagonal (odd rows shifted half a pitch) or auto (from the first frame)")
+    orientation_deg: float = setting(0.0, minimum=-180.0, maximum=180.0,
+                                     doc="angle of the lenslet rows from the camera's columns, degrees")
     offset_px: tuple[float, float] = setting((0.0, 0.0), minimum=-0.5,
-                                             doc="(col, row) of the top-left corner of lenslet (0, 0), pixels")
+                                             doc="lenslet (0, 0) is centred at offset_px + pitch_px / 2, pixels")
     grid_shape: tuple[int, int] | None = setting(None, minimum=1, maximum=2048,
                                                  doc="(rows, cols) of lenslets; absent: as many as fit")
     modes: int = setting(36, minimum=3, maximum=231, doc="Noll terms reconstructed, from piston")
@@ -40,25 +47,13 @@ class ShackHartmannSettings:
         """Spot displacement per wavefront slope: ``f lambda / p**2``, pixels per (wave per pixel)."""
         return self.focal_length_um * (wavelength_nm * 1e-3) / self.pixel_um ** 2
 
-    def grid_for(self, frame_shape: tuple[int, int]) -> LensletGrid:
-        """The lenslet grid on frames of ``frame_shape`` ``(rows, cols)``.
-
-        Without ``grid_shape`` it holds every whole lenslet between the offset and the frame's far
-        pixel edges (pixel centres are integers, so the frame spans ``[-0.5, size - 0.5]``).
-
-        Raises
-        ------
-        ValueError
-            If no lenslet fits, or a subaperture window leaves the frame.
-        """
-        if self.grid_shape is not None:
-            shape = self.grid_shape
-        else:
-            shape = tuple(int(math.floor((size - 0.5 - start) / self.pitch_px))
-                          for size, start in zip(frame_shape, self.offset_px[::-1]))
-            if min(shape) < 1:
-                raise ValueError(f"no whole lenslet of pitch {self.pitch_px} px from {self.offset_px} "
-                                 f"fits in a {frame_shape} frame")
-        grid = LensletGrid(pitch_px=self.pitch_px, offset_px=self.offset_px, shape=shape)
-        grid.check_fits(frame_shape)
-        return grid
+    def setup(self, wavelength_nm: float) -> ShackHartmannSetup:
+        """These settings as the Shack-Hartmann processor takes them, coefficients in waves of ``wavelength_nm``."""
+        return ShackHartmannSetup(
+            focal_length_um=self.focal_length_um, pixel_um=self.pixel_um, wavelength_nm=wavelength_nm,
+            lattice=self.lattice, pitch_px=self.pitch_px, orientation_deg=self.orientation_deg,
+            offset_px=self.offset_px, grid_shape=self.grid_shape, reference=self.reference,
+            pupil_px=(*self.pupil_centre_px, self.pupil_radius_px), modes=self.modes, ordering=self.ordering,
+            centroid_threshold=self.centroid_threshold, min_intensity=self.min_intensity,
+            lit_fraction=self.lit_fraction, min_lit_fraction=self.min_lit_fraction,
+            max_condition=self.max_condition, reconstructor_cache=self.reconstructor_cache)

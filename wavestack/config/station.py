@@ -26,9 +26,10 @@ Tables (see ``wavestack/config/default.toml``, the simulated station ``wavestack
     defaults to ``[station] wavelength_nm`` and must equal it when given.
 ``[lenslets]``
     The simulated lenslet array (:class:`~wavestack.simulators.spots.LensletArraySettings`) of a
-    simulated Shack-Hartmann camera. ``pitch_px``, ``offset_px`` and ``grid_shape`` default to
-    the ``[shack_hartmann]`` values, ``gain_px`` to ``f lambda / p**2`` from them and the
-    wavelength, ``bit_depth`` to the simulated camera's pixel format.
+    simulated Shack-Hartmann camera. ``pitch_px``, ``offset_px``, ``grid_shape``,
+    ``orientation_deg`` and ``lattice`` default to the ``[shack_hartmann]`` values (``lattice``
+    must be given when the sensor's is ``"auto"``), ``gain_px`` to ``f lambda / p**2`` from them
+    and the wavelength, ``bit_depth`` to the simulated camera's pixel format.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from typing import Any
 from wavestack.config._checks import BIT_DEPTH
 from wavestack.config.camera import CameraSimulatorSettings, parse_camera_config
 from wavestack.config.schema import ConfigError, parse_section, parse_toml, read_config_text
+from wavestack.config.surface import SurfaceSettings
 from wavestack.config.plc import parse_plc_config
 from wavestack.config.pzt import parse_pzt_config
 from wavestack.simulators.bench import PiezoCoupling
@@ -52,9 +54,9 @@ from wavestack.config.station_rules import check_station_rules
 from wavestack.config.station_schema import OutputSettings, StationConfig, StationSettings
 
 _TABLES = ("station", "processing", "camera", "pzt", "plc", "outputs", "optic", "bench", "shack_hartmann",
-           "lenslets")
+           "lenslets", "surface")
 _SHACK_HARTMANN_ONLY = ("shack_hartmann", "lenslets")
-_INTERFEROMETER_ONLY = ("processing", "pzt", "bench")
+_INTERFEROMETER_ONLY = ("processing", "pzt", "bench", "surface")
 #: The simulated station, shipped inside the package (the one default station file).
 DEFAULT_CONFIG = Path(__file__).resolve().parent / "default.toml"
 
@@ -108,7 +110,9 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         pzt=pzt, pzt_simulator=pzt_simulator, plc=plc,
         outputs=_section(OutputSettings, document, "outputs", source),
         optic=optic, bench=_section(PiezoCoupling, document, "bench", source),
+        surface=_section(SurfaceSettings, document, "surface", source),
     )
+    config.surface.request(source)  # a tolerance that cannot be read is refused with the file
     check_station_rules(config)
     return config
 
@@ -181,8 +185,13 @@ def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: Stat
     try:
         parsed = parse_section(LensletArraySettings, table, source=source, section="lenslets")
         given = set(table)
-        derived: dict[str, Any] = {name: getattr(sensor, name) for name in ("pitch_px", "offset_px", "grid_shape")
-                                   if name not in given}
+        derived: dict[str, Any] = {name: getattr(sensor, name) for name in ("pitch_px", "offset_px", "grid_shape",
+                                                                           "orientation_deg") if name not in given}
+        if "lattice" not in given:
+            if sensor.lattice == "auto":
+                raise ConfigError(f"{source}: [lenslets] lattice: the simulated array's kind ('square' or "
+                                  f"'hexagonal') is needed when [shack_hartmann] lattice = 'auto'")
+            derived["lattice"] = sensor.lattice
         if "gain_px" not in given:
             derived["gain_px"] = sensor.gain_px(station.wavelength_nm)
         if "bit_depth" not in given:

@@ -28,6 +28,7 @@ import math
 from typing import Final
 from wavestack.config._checks import BIT_DEPTH
 from wavestack.config.schema import ConfigError
+from wavestack.pipeline.instrument import configured_lattice
 from wavestack.config.station_schema import StationConfig
 
 __all__ = ["MAX_RING_BYTES", "check_station_rules"]
@@ -123,8 +124,12 @@ def _check_simulated_frames(config: StationConfig) -> None:
             f"{simulator.width} x {simulator.height} {simulator.pixel_format} hold {frames * frame_bytes / 2**30:.3g} GiB; "
             f"expected at most {MAX_RING_BYTES / 2**30:g} GiB")
     if config.shack_hartmann is not None:
+        sensor = config.shack_hartmann
+        kind = config.lenslets.lattice if sensor.lattice == "auto" and config.lenslets is not None else sensor.lattice
+        shape = (simulator.height, simulator.width)
         try:
-            config.shack_hartmann.grid_for((simulator.height, simulator.width))
+            for each in (("square", "hexagonal") if kind == "auto" else (kind,)):
+                configured_lattice(sensor.setup(config.station.wavelength_nm), each, shape).check_fits(shape)
         except ValueError as error:
             raise ConfigError(f"{source}: [shack_hartmann] pitch_px, offset_px, grid_shape: {error} "
                               f"([camera.simulator] width {simulator.width}, height {simulator.height})") from None

@@ -15,6 +15,7 @@ from wavestack.config.processing import ProcessingSettings
 from wavestack.config.pzt import PiezoSettings, PiezoSimulatorSettings
 from wavestack.config.schema import setting
 from wavestack.config.shack_hartmann import ShackHartmannSettings
+from wavestack.config.surface import SurfaceSettings
 from wavestack.simulators.bench import PiezoCoupling
 from wavestack.simulators.optic import OpticSettings
 from wavestack.simulators.spots import LensletArraySettings
@@ -78,6 +79,7 @@ class StationConfig:
     bench: PiezoCoupling
     shack_hartmann: ShackHartmannSettings | None = None
     lenslets: LensletArraySettings | None = None
+    surface: SurfaceSettings = SurfaceSettings()
 
     @property
     def phase_stepping(self) -> bool:

@@ -1,7 +1,8 @@
 """The figure of one fit (``wavestack analyze --plot``, ``wavestack fit --plot``).
 
 Four panels: the measured map, the fitted map, the residual (measured minus fitted) and the
-coefficients as named bars. The measured and fitted maps share one colour scale, so their colours
+coefficients as named bars; below them, when the command measured them, the surface figures'
+PSD, slope and filtered panels (:mod:`wavestack.figures.surface_panels`). The measured and fitted maps share one colour scale, so their colours
 compare directly; the residual, usually far smaller, gets its own symmetric scale (on the shared
 one it would be a uniform white).
 """
@@ -18,6 +19,8 @@ from numpy.typing import NDArray
 
 from wavestack.figures.drawing import aperture_outline, coefficient_bars, map_panel, new_figure, save_figure
 from wavestack.figures.drawing import symmetric_limits
+from wavestack.figures.surface_panels import draw_surface_panels, surface_panel_count
+from wavestack.pipeline import SurfaceFigures
 
 __all__ = ["FIT_FIGURE_INCHES", "FitView", "fit_figure", "write_fit_figure"]
 
@@ -49,6 +52,8 @@ class FitView:
         The fit method.
     removed : str or None
         "ptt" or "pttp" when those terms were removed before the fit.
+    surface : SurfaceFigures or None
+        The surface figures; their PSD, slope and filtered surface get panels of their own.
     """
 
     measured: NDArray[np.float64]
@@ -61,6 +66,7 @@ class FitView:
     source: str
     method: str
     removed: str | None = None
+    surface: SurfaceFigures | None = None
 
 
 def _stats(values: NDArray[np.float64], unit: str) -> str:
@@ -87,8 +93,10 @@ def fit_figure(view: FitView) -> Figure:
     >>> [a.get_title()[:8] for a in fit_figure(view).axes[:3]]
     ['measured', 'fitted (', 'residual']
     """
-    figure = new_figure(*FIT_FIGURE_INCHES)
-    grid = figure.add_gridspec(2, 3, height_ratios=(1.15, 1.0))
+    extra = surface_panel_count(view.surface)
+    width, height = FIT_FIGURE_INCHES
+    figure = new_figure(width, height + (4.5 if extra else 0.0))
+    grid = figure.add_gridspec(3 if extra else 2, 3, height_ratios=(1.15, 1.0, 1.15)[: 3 if extra else 2])
     maps = [figure.add_subplot(grid[0, k]) for k in range(3)]
     bars = figure.add_subplot(grid[1, :])
     shared = symmetric_limits(view.measured, view.fitted)
@@ -107,6 +115,8 @@ def fit_figure(view: FitView) -> Figure:
         aperture_outline(axes, mask)
     coefficient_bars(bars, view.coefficients, view.modes, view.first_index, unit=view.unit,
                      title=f"coefficients ({view.unit})")
+    if extra:
+        draw_surface_panels(figure, [figure.add_subplot(grid[2, k]) for k in range(extra)], view.surface)
     rms = float(np.nanstd(view.residual)) if np.isfinite(view.residual).any() else math.nan
     figure.suptitle(f"{view.source}: {view.method} fit of {len(view.modes)} modes, residual RMS {rms:.4g} {view.unit}")
     return figure

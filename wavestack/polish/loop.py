@@ -40,6 +40,8 @@ from wavestack.polish.plots import plot_run
 from wavestack.polish.recorder import CampaignRecorder
 from wavestack.polish.run_record import RunRecord, run_finished, run_started
 from wavestack.polish.state import LoopEvent, LoopPhase, LoopState, advance, judge_job, judge_measurement
+from wavestack.pipeline import FormTolerance, SurfaceAnalyzer, SurfaceRequest
+from wavestack.pipeline.surface import SpecVerdict
 
 logger = logging.getLogger(__name__)
 
@@ -53,6 +55,7 @@ class LoopOptions:
     target_rms_nm: float
     max_runs: int
     solver: str
+    spec: FormTolerance | None = None  # the drawing: the loop stops when it is met, not on the RMS
 
 
 @dataclass(frozen=True)
@@ -71,11 +74,15 @@ class CampaignSummary:
     state: LoopState
     runs: tuple[RunRecord, ...] = ()
     rms_nm: tuple[float, ...] = ()
+    verdict: SpecVerdict | None = None
 
     def to_json(self) -> dict[str, object]:
-        return {"type": "summary", "final_phase": self.state.phase.value, "reason": self.state.reason,
-                "runs_done": self.state.runs_done, "rms_nm": list(self.rms_nm),
-                "job_ids": [row.job_id for row in self.runs]}
+        summary: dict[str, object] = {
+            "type": "summary", "final_phase": self.state.phase.value, "reason": self.state.reason,
+            "runs_done": self.state.runs_done, "rms_nm": list(self.rms_nm), "job_ids": [row.job_id for row in self.runs]}
+        if self.verdict is not None:
+            summary["spec"] = self.verdict.as_dict()
+        return summary
 
 
 @dataclass
@@ -101,6 +108,7 @@ class _Campaign:
     not_before_ns: int = 0
     runs: list[RunRecord] = field(default_factory=list)
     rms_nm: list[float] = field(default_factory=list)
+    verdict: SpecVerdict | None = None  # the last trusted measurement against the drawing
 
 
 class PolishingLoop:
@@ -169,7 +177,7 @@ class PolishingLoop:
             self._go(c, event, reason)
         if c.run is not None:  # a run the loop did not see measured after
             self._finish_run(c, None)
-        return CampaignSummary(c.state, tuple(c.runs), tuple(c.rms_nm))
+        return CampaignSummary(c.state, tuple(c.runs), tuple(c.rms_nm), c.verdict)
 
     def _go(self, c: _Campaign, event: LoopEvent, reason: str) -> None:
         c.state = advance(c.state, event, reason)
@@ -214,10 +222,18 @@ class PolishingLoop:
             self._recorder.measurement(measurement)
 
     def _check(self, c: _Campaign) -> tuple[LoopEvent, str]:
-        assert c.measurement is not None
-        return judge_measurement(c.measurement.rms_nm, c.previous_rms_nm, c.state.runs_done,
+        measurement = c.measurement
+        assert measurement is not None
+        if self._options.spec is not None:  # the surface error against the drawing (target figure subtracted)
+            valid = measurement.mask & np.isfinite(measurement.surface_nm)
+            try:
+                analyzer = SurfaceAnalyzer(valid, SurfaceRequest(tolerance=self._options.spec))
+                c.verdict = analyzer.measure(measurement.surface_nm).verdict
+            except ValueError as error:  # never polish against a drawing that could not be checked
+                return LoopEvent.FAULT, f"the drawing cannot be checked on this measurement: {error}"
+        return judge_measurement(measurement.rms_nm, c.previous_rms_nm, c.state.runs_done,
                                  target_rms_nm=self._options.target_rms_nm, max_runs=self._options.max_runs,
-                                 min_improvement=self._settings.min_improvement)
+                                 min_improvement=self._settings.min_improvement, verdict=c.verdict)
 
     def _solve(self, c: _Campaign) -> tuple[LoopEvent, str]:
         assert c.measurement is not None

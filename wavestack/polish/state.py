@@ -21,6 +21,8 @@ import enum
 from dataclasses import dataclass, replace
 from typing import Final
 
+from wavestack.pipeline.surface import SpecVerdict
+
 __all__ = ["LoopEvent", "LoopPhase", "LoopState", "TERMINAL_PHASES", "TRANSITIONS", "advance", "judge_job", "judge_measurement"]
 
 
@@ -148,13 +150,16 @@ def advance(state: LoopState, event: LoopEvent, reason: str | None = None) -> Lo
 
 
 def judge_measurement(rms_nm: float, previous_rms_nm: float | None, runs_done: int, *, target_rms_nm: float,
-                      max_runs: int, min_improvement: float = 0.0) -> tuple[LoopEvent, str]:
+                      max_runs: int, min_improvement: float = 0.0,
+                      verdict: SpecVerdict | None = None) -> tuple[LoopEvent, str]:
     """What a trusted measurement means for the loop (pure): the check step's event and its reason.
 
     In this order: at or below the target -> AT_TARGET; the last run did not lower the RMS by at
     least the fraction ``min_improvement`` -> NOT_IMPROVED; ``runs_done >= max_runs`` ->
     RUNS_EXHAUSTED; else NEEDS_WORK. The target is checked first so a last run that reaches it
-    ends as a success, not as a spent budget.
+    ends as a success, not as a spent budget. With the drawing's ``verdict`` the target is the
+    drawing: AT_TARGET when every toleranced quantity passes (whatever the RMS), and every other
+    reason names the limiting quantity.
 
     Parameters
     ----------
@@ -167,6 +172,8 @@ def judge_measurement(rms_nm: float, previous_rms_nm: float | None, runs_done: i
     max_runs : int
     min_improvement : float
         Fraction of the previous RMS a run must remove at least (0: any decrease counts).
+    verdict : SpecVerdict, optional
+        This measurement against the drawing's tolerance (``polish --spec``).
 
     Returns
     -------
@@ -179,13 +186,18 @@ def judge_measurement(rms_nm: float, previous_rms_nm: float | None, runs_done: i
     """
     if not rms_nm == rms_nm:  # NaN: never a reason to polish
         return LoopEvent.FAULT, "measured RMS is not a number"
-    if rms_nm <= target_rms_nm:
-        return LoopEvent.AT_TARGET, f"RMS {rms_nm:.2f} nm <= target {target_rms_nm:g} nm"
+    drawing = "" if verdict is None else f"; drawing {verdict.summary()}"
+    if (verdict.passed if verdict is not None else rms_nm <= target_rms_nm):
+        met = verdict.summary() if verdict is not None else f"RMS {rms_nm:.2f} nm <= target {target_rms_nm:g} nm"
+        return LoopEvent.AT_TARGET, met
     if previous_rms_nm is not None and not rms_nm < previous_rms_nm * (1.0 - min_improvement):
         return LoopEvent.NOT_IMPROVED, (f"run {runs_done} did not improve the RMS: {previous_rms_nm:.2f} -> "
-                                        f"{rms_nm:.2f} nm")
+                                        f"{rms_nm:.2f} nm{drawing}")
     if runs_done >= max_runs:
-        return LoopEvent.RUNS_EXHAUSTED, f"{runs_done} run(s) done (max_runs = {max_runs}); RMS {rms_nm:.2f} nm"
+        return LoopEvent.RUNS_EXHAUSTED, (f"{runs_done} run(s) done (max_runs = {max_runs}); RMS {rms_nm:.2f} nm"
+                                          f"{drawing}")
+    if verdict is not None:
+        return LoopEvent.NEEDS_WORK, f"RMS {rms_nm:.2f} nm; drawing {verdict.summary()}"
     return LoopEvent.NEEDS_WORK, f"RMS {rms_nm:.2f} nm > target {target_rms_nm:g} nm"
 
 

@@ -20,7 +20,8 @@ import numpy as np
 from wavestack.config import StationConfig, parse_station_config
 from wavestack.pipeline import InputError
 from wavestack.recording.reader import RecordingDamaged, RecordingReader
-from wavestack.station import InterferometerOutcome, SetBatch, SlopeOutcome, build_processor, json_ready
+from wavestack.pipeline.instrument import SlopeOutcome
+from wavestack.station import InterferometerOutcome, SetBatch, build_processor, json_ready
 
 
 @dataclass(frozen=True, eq=False)

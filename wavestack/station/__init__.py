@@ -1,7 +1,7 @@
 """The live station: sources, devices, the two processors, the one-way result loop, outputs, live view.
 
 A cycle runs one way, one value per arrow: frames -> a processor's frozen outcome
-(:class:`InterferometerOutcome` or :class:`SlopeOutcome`) -> :func:`make_result` (pure) -> the
+(:class:`InterferometerOutcome` or :class:`~wavestack.pipeline.instrument.SlopeOutcome`) -> :func:`make_result` (pure) -> the
 output stage (safety stage, PLC), which returns an :class:`OutputRecord` -> one
 :class:`CycleRecord` for every sink.
 """
@@ -36,26 +36,18 @@ from wavestack.station.results import (
     json_ready,
 )
 from wavestack.station.set_batch import GROUP_SETS, SetBatch
-from wavestack.station.shack_hartmann import (
-    MODAL,
-    LensletSlopes,
-    SlopeOutcome,
-    SlopeProcessor,
-    coefficient_errors,
-    pupil_lenslets,
-)
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 from wavestack.station.station import Station, StationSummary, build_processor
-from wavestack.station.truth import TruthCheck
+from wavestack.station.truth import TruthCheck, coefficient_errors
 
 __all__ = [
     "ApertureAction", "ApertureEvent", "AperturePhase", "ApertureRecord", "ApertureState", "CARRIER_REFRESH_SETS",
     "CarrierSource", "Counters", "CycleRecord", "Detection", "FALLBACK_METHOD", "FitDiagnostics", "FitterCache",
-    "FitterChoice", "FitterDiagnostics", "FrameCounts", "GROUP_SETS", "Heartbeat", "InterferometerOutcome", "LensletSlopes",
-    "LiveSnapshot", "LiveStats", "MODAL", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet", "ProcessorOutcome",
+    "FitterChoice", "FitterDiagnostics", "FrameCounts", "GROUP_SETS", "Heartbeat", "InterferometerOutcome",
+    "LiveSnapshot", "LiveStats", "OutputRecord", "PhaseStepSource", "PlcOutput", "PreparedSet", "ProcessorOutcome",
     "ReconstructorDiagnostics", "ResultSink", "SentCommand", "SetBatch", "SetCounts", "SetProcessor",
-    "SlopeOutcome", "SlopeProcessor", "Station", "StationDevices", "StationResult", "StationSummary", "TruthCheck",
+    "Station", "StationDevices", "StationResult", "StationSummary", "TruthCheck",
     "TruthErrors", "build_processor", "coefficient_errors", "configure_camera", "confirm", "counter_lines",
-    "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "pupil_lenslets", "render_live_view",
+    "json_ready", "make_result", "open_station_devices", "phase_steps_rad", "render_live_view",
     "start_up_hold", "with_output",
 ]

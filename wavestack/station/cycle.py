@@ -2,7 +2,7 @@
 
 :func:`make_result` is pure: it turns a processor's frozen outcome (an
 :class:`~wavestack.station.interferometer.InterferometerOutcome` or a
-:class:`~wavestack.station.shack_hartmann.SlopeOutcome`, both seen through
+:class:`~wavestack.pipeline.instrument.SlopeOutcome`, both seen through
 :class:`ProcessorOutcome`) and the cycle's facts into a
 :class:`~wavestack.station.results.StationResult`. The output stage then sends the result and
 returns what it sent; the :class:`CycleRecord` holding both is what every sink receives.
@@ -26,7 +26,7 @@ from wavestack.station.results import (
     StationResult,
     TruthErrors,
 )
-from wavestack.station.shack_hartmann import LensletSlopes
+from wavestack.pipeline.instrument import LensletSlopes
 
 
 class ProcessorOutcome(Protocol):

@@ -14,6 +14,7 @@ import numpy as np
 
 from wavestack.station.counters import Counters
 from wavestack.station.results import StationResult
+from wavestack.station.surface_stage import SurfaceRecord
 
 _TREND_THRESHOLD = 1e-3  # waves; smaller changes show as steady
 
@@ -34,6 +35,7 @@ class LiveSnapshot:
     truth_error_rms: float | None
     last_reason: str | None
     residual: tuple[float, float] | None = None  # (rms, pv) of the last valid result, waves
+    surface: str | None = None  # the last surface figures and verdict, one line
 
 
 class LiveStats:
@@ -57,6 +59,7 @@ class LiveStats:
         self._last: StationResult | None = None
         self._last_reason: str | None = None
         self._residual: tuple[float, float] | None = None
+        self._surface: str | None = None
 
     def add(self, result: StationResult, now_ns: int) -> None:
         """Account for one result received at host time ``now_ns``."""
@@ -67,6 +70,8 @@ class LiveStats:
             self._valid += 1
             self._coefficients.append(result.coefficients)
             self._residual = (result.residual_rms, result.residual_pv)
+            if result.surface is not None:
+                self._surface = surface_line(result.surface)
         else:
             self._last_reason = result.reason
         self._last = result
@@ -96,7 +101,7 @@ class LiveStats:
             latency_p99_ms=float(np.nanpercentile(latencies, 99)) if np.isfinite(latencies).any() else math.nan,
             counters=last.counters if last else None, aperture=aperture, fitter=fitter, leading=leading,
             truth_error_rms=last.truth_error_rms if last else None, last_reason=self._last_reason,
-            residual=self._residual,
+            residual=self._residual, surface=self._surface,
         )
 
 
@@ -120,11 +125,23 @@ def render_live_view(snapshot: LiveSnapshot, ordering: str) -> list[str]:
         lines.append(f"waves ({ordering}): {terms}")
     if s.residual is not None:
         lines.append(f"fit residual: rms {s.residual[0]:.4f}  pv {s.residual[1]:.4f} waves")
+    if s.surface is not None:
+        lines.append(s.surface)
     if s.truth_error_rms is not None:
         lines.append(f"error against the simulated truth: {s.truth_error_rms:.4f} waves rms")
     if s.last_reason:
         lines.append(f"last invalid: {s.last_reason}")
     return lines
+
+
+def surface_line(record: SurfaceRecord) -> str:
+    """The live view's line of a result's surface figures: the verdict first, then SAG, IRR, RSI, PVr."""
+    form = record.form
+    verdict = "" if record.verdict is None else (
+        f"{record.verdict.tolerance.notation} {'PASS' if record.verdict.passed else 'FAIL'} "
+        f"(limiting {record.verdict.limiting.quantity})  ")
+    return (f"surface: {verdict}SAG {form.sag_nm:+.1f}  IRR {form.irr_nm:.1f}  RSI {form.rsi_nm:.1f}  "
+            f"RMSi {form.rmsi_nm:.2f}  PVr {record.pvr.pvr:.1f} nm")
 
 
 def counter_lines(counters: Counters | None) -> list[str]:

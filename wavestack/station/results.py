@@ -11,44 +11,9 @@ import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Union
 
+from wavestack.pipeline.instrument import ApertureRecord, ReconstructorDiagnostics
 from wavestack.station.counters import Counters
-
-
-@dataclass(frozen=True)
-class ApertureRecord:
-    """The aperture a result was measured on.
-
-    Attributes
-    ----------
-    id : int or None
-        Counted per run from 0 (interferometer: per aperture; Shack-Hartmann: per lit-lenslet set).
-    changed : bool
-        This set started it.
-    topology : str
-        A one-line description (interferometer: the aperture's topology and pixel count).
-    valid_pixels : int
-    components : int or None
-        Interferometer: connected components of the aperture.
-    valid_lenslets : int or None
-        Shack-Hartmann: lit lenslets used.
-    """
-
-    id: int | None
-    changed: bool
-    topology: str
-    valid_pixels: int
-    components: int | None = None
-    valid_lenslets: int | None = None
-
-    def to_json(self) -> dict[str, object]:
-        """The record's keys as the JSON lines carry them (absent optional figures left out)."""
-        record: dict[str, object] = {"id": self.id, "changed": self.changed, "topology": self.topology}
-        if self.components is not None:
-            record["components"] = self.components
-        if self.valid_lenslets is not None:
-            record["valid_lenslets"] = self.valid_lenslets
-        record["valid_pixels"] = self.valid_pixels
-        return record
+from wavestack.station.surface_stage import SurfaceRecord
 
 
 @dataclass(frozen=True)
@@ -58,18 +23,6 @@ class FitDiagnostics:
     gram_condition: float | None
     flips: int | None
     max_beltrami: float | None
-
-    def to_json(self) -> dict[str, object]:
-        return asdict(self)
-
-
-@dataclass(frozen=True)
-class ReconstructorDiagnostics:
-    """A Shack-Hartmann modal reconstructor's figures: condition number, lit and pupil lenslets."""
-
-    condition: float
-    lit_lenslets: int
-    pupil_lenslets: int
 
     def to_json(self) -> dict[str, object]:
         return asdict(self)
@@ -219,6 +172,9 @@ class StationResult:
         aperture in the fitted subspace, waves.
     output : OutputRecord or None
         What went to the PLC: ``sent`` (bool), ``status`` flags, ``command_id``.
+    surface : SurfaceRecord or None
+        With ``[surface] enabled``: the ISO form figures, PVr and the drawing's verdict of the
+        measured surface (nm), on valid interferometer results.
     """
 
     index: int
@@ -243,6 +199,7 @@ class StationResult:
     truth_rms: float | None = None
     truth_error_rms: float | None = None
     output: OutputRecord | None = None
+    surface: SurfaceRecord | None = None
 
     @classmethod
     def invalid(cls, index: int, reason: str, counters: Counters, *, ordering: str,
@@ -268,6 +225,7 @@ class StationResult:
         values["fitter_diagnostics"] = {} if self.fitter_diagnostics is None else self.fitter_diagnostics.to_json()
         values["aperture"] = {} if self.aperture is None else self.aperture.to_json()
         values["output"] = None if self.output is None else self.output.to_json()
+        values["surface"] = None if self.surface is None else self.surface.to_json()
         return {"type": "result", **json_ready(values)}
 
 

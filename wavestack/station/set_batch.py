@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from wavestack.pipeline import FitResult, InvalidFrame
 from wavestack.station.interferometer import InterferometerOutcome, PreparedSet, SetProcessor
-from wavestack.station.shack_hartmann import SlopeOutcome, SlopeProcessor
+from wavestack.pipeline.instrument import ShackHartmannProcessor, SlopeOutcome
 
 #: Most maps fitted in one batch (~256 kB each on the small station's fit grid).
 GROUP_SETS: Final = 16
@@ -48,7 +48,7 @@ class SetBatch(Generic[Tag]):
 
     Parameters
     ----------
-    processor : SetProcessor or SlopeProcessor
+    processor : SetProcessor or ShackHartmannProcessor
     group_sets : int
         Most maps per batched fit.
     batched : bool
@@ -66,7 +66,7 @@ class SetBatch(Generic[Tag]):
             ...
     """
 
-    def __init__(self, processor: SetProcessor | SlopeProcessor, *, group_sets: int = GROUP_SETS,
+    def __init__(self, processor: SetProcessor | ShackHartmannProcessor, *, group_sets: int = GROUP_SETS,
                  batched: bool = True) -> None:
         if group_sets < 1:
             raise ValueError(f"group_sets: expected at least 1, got {group_sets}")

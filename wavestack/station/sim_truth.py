@@ -15,12 +15,13 @@ from numpy.typing import NDArray
 
 from wavestack.drivers.frames import Frame
 from wavestack.pipeline import InvalidFrame
+from wavestack.pipeline.instrument import SlopeOutcome
 from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
 from wavestack.simulators.spots import SpotTruth
 from wavestack.station.fitter_cache import FitterChoice
 from wavestack.station.interferometer import InterferometerOutcome
 from wavestack.station.results import TruthErrors
-from wavestack.station.shack_hartmann import SlopeOutcome, coefficient_errors
+from wavestack.station.truth import coefficient_errors
 
 logger = logging.getLogger(__name__)
 
@@ -104,7 +105,7 @@ class ShackHartmannTruthCheck:
     """Truth errors of a Shack-Hartmann reconstruction, from the coefficients.
 
     Both in the unit-RMS circle basis over the pupil disk, Noll 4 onwards
-    (:func:`~wavestack.station.shack_hartmann.coefficient_errors`).
+    (:func:`~wavestack.station.truth.coefficient_errors`).
     """
 
     bench: SimulatedShackHartmann

@@ -3,7 +3,7 @@
 One pipeline thread (the caller's) takes the newest set from the source and runs one cycle, one
 way, one value per arrow: the processor (a
 :class:`~wavestack.station.interferometer.SetProcessor` for an interferometer, a
-:class:`~wavestack.station.shack_hartmann.SlopeProcessor` for a Shack-Hartmann sensor) returns a
+:class:`~wavestack.pipeline.instrument.ShackHartmannProcessor` for a Shack-Hartmann sensor) returns a
 frozen outcome; :func:`~wavestack.station.cycle.make_result` makes the
 :class:`~wavestack.station.results.StationResult`; the output stage sends it through the safety
 stage to the PLC (with a heartbeat each cycle, so a stalled pipeline is a dead host to the PLC's
@@ -26,9 +26,10 @@ carries the last consistent counters.
 A device fault is not a host fault: while the loop waits for a set or backs off, it waits in
 slices of at most the heartbeat period (a quarter of the PLC watchdog time) and keeps the PLC's
 heartbeat alive between them (:meth:`PlcOutput.keep_alive`, a heartbeat, never a command). A set
-is processed on the processing thread (one thread for the whole run) while the loop waits for it
-the same way, so the first aperture's detection, the first fitter build and the first compilation
-(seconds on a loaded machine) never starve the watchdog at start; but only for
+is processed, and its surface figures taken, on the processing thread (one thread for the whole
+run) while the loop waits for it the same way, so the first aperture's detection, the first fitter
+and surface analyzer builds and the first compilation (seconds on a loaded machine) never starve
+the watchdog at start; but each for at most
 ``[station] max_processing_s``: processing that takes longer gets no more heartbeats, and the
 watchdog trips. A stalled loop (a device call that does not return) beats nothing either. The
 stop event is seen within one slice.
@@ -39,8 +40,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from typing import Any, TypeVar
 
 from wavestack.config import StationConfig
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, renewed
@@ -49,16 +51,18 @@ from wavestack.drivers.ring import WaitTimeout
 from wavestack.drivers.role_thread import RoleThread
 from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
+from wavestack.station.surface_stage import surface_stage
 from wavestack.station.devices import StationDevices, phase_steps_rad, reconnect_devices
 from wavestack.station.interferometer import InterferometerOutcome, SetProcessor
 from wavestack.station.heap import HeapRelease
 from wavestack.station.latency import LatencyHistogram
 from wavestack.station.outputs import PlcOutput
 from wavestack.station.results import StationResult, json_ready
-from wavestack.station.shack_hartmann import SlopeOutcome, SlopeProcessor
+from wavestack.pipeline.instrument import ShackHartmannProcessor, SlopeOutcome
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 
 logger = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 __all__ = ["ResultSink", "Station", "StationSummary", "build_processor"]
 
@@ -137,6 +141,7 @@ class Station:
         self._last_counters = self._retired  # the last snapshot that added up
         self._not_back = DeviceDisconnected(devices.camera.name, "acquisition not started")  # while no source
         self._output: PlcOutput | None = None
+        self._surface = surface_stage(config)
         self._slice_s = _MAX_WAIT_SLICE_S
         self._heap = HeapRelease(config.station.heap_release_s)
         if devices.link is not None and config.plc is not None:
@@ -256,26 +261,31 @@ class Station:
         """One set, one way: outcome -> result -> output -> the record of the cycle."""
         check = self._devices.truth_check
         truth = check.capture(frames[0]) if check is not None else None  # at once: the simulator forgets
-        outcome = self._process([f.pixels for f in frames])
+        pixels = [f.pixels for f in frames]
+        outcome = self._off_loop(lambda: self.processor.process(pixels))
         errors = check.compare(truth, outcome) if check is not None and truth is not None else None
         counters, miscount = self._counters()
         result = make_result(index, frames, outcome, ordering=self._config.processing.ordering,
                              counters=counters, now_ns=time.time_ns(), truth=errors)
         if miscount is not None:  # never a wrong number, never a dead station: an invalid result
             result = replace(result, valid=False, reason=miscount)
+        waves = None if isinstance(outcome, SlopeOutcome) else outcome.waves
+        if self._surface is not None and result.valid and waves is not None:  # before the PLC: it shows them
+            stage = self._surface
+            result = replace(result, surface=self._off_loop(lambda: stage.record(index, waves)))
         sent = self._output.send(result) if self._output is not None else None
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
-                           outcome.lenslets if isinstance(outcome, SlopeOutcome) else None,
-                           None if isinstance(outcome, SlopeOutcome) else outcome.waves)
+                           outcome.lenslets if isinstance(outcome, SlopeOutcome) else None, waves)
 
-    def _process(self, pixels: list[Any]) -> InterferometerOutcome | SlopeOutcome:
-        """The processor's outcome, computed on the processing thread while the loop keeps the PLC alive
-        for at most ``max_processing_s`` (module notes); its exception, if it raised."""
+    def _off_loop(self, compute: Callable[[], _T]) -> _T:
+        """``compute()`` (a set's processing, its surface figures) on the processing thread while the
+        loop keeps the PLC alive for at most ``max_processing_s`` (module notes); its exception, if it
+        raised."""
         box: list[tuple[bool, Any]] = []
 
         def work() -> None:
             try:
-                box.append((True, self.processor.process(pixels)))
+                box.append((True, compute()))
             except BaseException as error:  # noqa: BLE001 - raised again on the loop's thread
                 box.append((False, error))
 
@@ -366,12 +376,12 @@ class Station:
                            if self._output is not None else None)
 
 
-def build_processor(config: StationConfig, *, background_builds: bool = True) -> SetProcessor | SlopeProcessor:
+def build_processor(config: StationConfig, *, background_builds: bool = True) -> SetProcessor | ShackHartmannProcessor:
     """The processor of a station's kind: phase maps and fits, or Shack-Hartmann slopes.
 
     ``background_builds=False`` builds fitters synchronously (replay, benchmarks of the stages).
     """
     if config.station.kind == "shack-hartmann":
         assert config.shack_hartmann is not None  # parse_station_config requires [shack_hartmann]
-        return SlopeProcessor(config.shack_hartmann, wavelength_nm=config.station.wavelength_nm)
+        return ShackHartmannProcessor(config.shack_hartmann.setup(config.station.wavelength_nm))
     return SetProcessor(config.processing, background_builds=background_builds)

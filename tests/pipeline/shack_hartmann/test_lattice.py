@@ -20,8 +20,7 @@ import pytest
 from scipy.special import erf
 
 from wavestack.pipeline.shack_hartmann import (
-    Centroider, LensletGrid, LensletLattice, ModalReconstructor, centroid_spots, convert_slopes, detect_grid,
-    detect_lattice, slopes,
+    Centroider, LensletLattice, ModalReconstructor, SpotMeasurement, convert_slopes, detect_lattice, slopes,
 )
 from wavestack.pipeline.zernike.circle import zernike_gradient
 from wavestack.pipeline.zernike.indices import mode_list
@@ -35,6 +34,11 @@ TRUTH = np.zeros(15)
 TRUTH[[3, 5, 7]] = [0.5, -0.2, 0.25]  # waves: defocus, astigmatism, coma (Noll 4, 6, 8)
 UNIT = {"square": np.array([[1.0, 0.0], [0.0, 1.0]]),
         "hexagonal": np.array([[1.0, 0.0], [0.5, 0.5 * math.sqrt(3.0)]])}
+
+
+def spots_of(frame: np.ndarray, lattice: LensletLattice, **options) -> SpotMeasurement:
+    """One frame's spots: a centroider built for its shape, then the measurement."""
+    return Centroider.build(lattice, frame.shape, **options).measure(frame)
 
 
 def lattice_of(kind: str, pitch: float, angle_deg: float) -> LensletLattice:
@@ -108,7 +112,7 @@ def test_detected_lattice_matches_the_lenslets(kind, pitch, angle) -> None:
     found = detect_lattice(frame)
     assert found.kind == kind
     assert found.count == truth.count  # one lenslet per spot, none invented or lost
-    centroids = centroid_spots(frame, truth).centroids
+    centroids = spots_of(frame, truth).centroids
     noise = float(np.sqrt(np.mean((centroids - truth.centres()) ** 2)))  # per axis, px
     assert noise < 0.05  # photon and read noise, as the square chain measures (~0.015 px)
     # the lattice is fitted to all spots: each centre is better than one spot's centroid, so
@@ -121,34 +125,24 @@ def test_detected_lattice_matches_the_lenslets(kind, pitch, angle) -> None:
     assert abs(turn) < math.degrees(3 * noise / (10 * pitch))
 
 
-def test_detect_grid_refuses_a_hexagonal_array() -> None:
-    # before: the two periodogram pitches were averaged into a square grid, silently
-    frame = render(lattice_of("hexagonal", 30.0, 0.0).centres(), seed=2)
-    with pytest.raises(ValueError, match="expected one square grid|expected a square lenslet grid") as error:
-        detect_grid(frame)
-    assert "\n" not in str(error.value)
-
-
-def test_a_square_grid_still_works_as_before() -> None:
-    grid = LensletGrid(pitch_px=25.0, offset_px=(6.5, 0.5), shape=(20, 20))
-    frame = render(grid.centres().reshape(-1, 2), seed=3)
-    found = detect_grid(frame)
-    assert found.shape == grid.shape and abs(found.pitch_px - 25.0) < 1e-2
-    assert np.allclose(found.offset_px, grid.offset_px, atol=0.05)
+def test_a_square_array_is_detected_and_centroided_as_blocks() -> None:
+    array = LensletLattice.array("square", 25.0, (20, 20), first_centre_px=(19.0, 13.0))
+    assert array.rectangle() == (20, 20)  # the block layout: one window start per row and per column
+    frame = render(array.centres(), seed=3)
     lattice = detect_lattice(frame)
-    assert lattice.kind == "square" and lattice.count == grid.count
-    # the grid as a lattice: the same windows, the same centroids, lenslet by lenslet
-    i, j = np.divmod(np.arange(grid.count), grid.shape[1])
-    as_lattice = LensletLattice("square", ((25.0, 0.0), (0.0, 25.0)), tuple(grid.centres()[0, 0]),
-                                np.column_stack([j, i]))
-    mine, true = matched(lattice, as_lattice)
-    assert np.abs(mine - true).max() < 0.05  # what detect_grid achieves on the same frame
-    assert as_lattice.window_width() == 25
-    assert np.array_equal(as_lattice.window_starts()[0], np.repeat(grid.window_starts()[0], grid.shape[1]))
-    by_grid = centroid_spots(frame, grid)
-    by_lattice = centroid_spots(frame, as_lattice)
-    assert np.allclose(by_lattice.centroids, by_grid.centroids, rtol=0, atol=1e-4)  # float32 sums
-    assert np.allclose(by_lattice.intensity, by_grid.intensity, rtol=1e-6)
+    assert lattice.kind == "square" and lattice.count == array.count and abs(lattice.pitch_px - 25.0) < 1e-2
+    mine, true = matched(lattice, array)
+    assert np.abs(mine - true).max() < 0.05  # a fit to 400 spots, each centroided to ~0.015 px
+    # the same lenslets in another order are centroided one window each: the same windows, the
+    # same centroids, lenslet by lenslet
+    order = np.random.default_rng(4).permutation(array.count)
+    shuffled = array.with_sites(array.sites[order])
+    assert shuffled.rectangle() is None and shuffled.window_width() == array.window_width() == 25
+    assert np.array_equal(shuffled.window_starts()[0], array.window_starts()[0][order])
+    by_blocks = spots_of(frame, array)
+    one_by_one = spots_of(frame, shuffled)
+    assert np.allclose(one_by_one.centroids, by_blocks.centroids[order], rtol=0, atol=1e-4)  # float32 sums
+    assert np.allclose(one_by_one.intensity, by_blocks.intensity[order], rtol=1e-6)
 
 
 def random_spots(rng: np.random.Generator, count: int, spacing: float) -> np.ndarray:
@@ -163,8 +157,8 @@ def random_spots(rng: np.random.Generator, count: int, spacing: float) -> np.nda
 
 def superimposed_pitches() -> np.ndarray:
     """Two square arrays of 39.3 and 35.3 px pitch over one another."""
-    first = LensletGrid(pitch_px=39.3, offset_px=(20.0, 20.0), shape=(11, 11)).centres().reshape(-1, 2)
-    second = LensletGrid(pitch_px=35.3, offset_px=(40.0, 32.0), shape=(12, 12)).centres().reshape(-1, 2)
+    first = LensletLattice.array("square", 39.3, (11, 11), first_centre_px=(39.65, 39.65)).centres()
+    second = LensletLattice.array("square", 35.3, (12, 12), first_centre_px=(57.65, 49.65)).centres()
     return np.vstack([first, second])
 
 
@@ -176,8 +170,6 @@ def test_neither_square_nor_hexagonal_is_refused_with_the_reason(spots) -> None:
         detect_lattice(frame)
     message = str(error.value)
     assert "\n" not in message and message.startswith("frame: ")
-    with pytest.raises(ValueError):
-        detect_grid(frame)  # and no square grid is made of them either
 
 
 @pytest.mark.parametrize("frame, reason", [(np.full(SIZE, 100.0), "no spots"),
@@ -234,7 +226,7 @@ def _slope_noise(lattice: LensletLattice, truth: LensletLattice, measured: np.nd
 def test_lattice_windows_equal_the_plain_loop(angle, seed) -> None:
     lattice = lattice_of("hexagonal", 23.7, angle)
     frame = np.random.default_rng(seed).integers(0, 4000, size=SIZE).astype(np.uint16)
-    measured = centroid_spots(frame, lattice, threshold=0.2)
+    measured = spots_of(frame, lattice, threshold=0.2)
     rows, cols, width = lattice.window_starts()
     assert width == math.floor(23.7 * 2 / (1 + math.sqrt(3)) + 1e-9) or angle != 0.0
     for k, (r0, c0) in enumerate(zip(rows, cols)):

@@ -36,10 +36,10 @@ from scipy.special import erf
 from wavestack.pipeline.zernike.annular import annular_zernike_gradient
 from wavestack.pipeline.aperture.region import Aperture
 from wavestack.pipeline.mapping.qcm import csf_qcm_map
-from wavestack.pipeline.shack_hartmann.centroids import Centroider, SpotMeasurement, centroid_spots
-from wavestack.pipeline.shack_hartmann.grid import LensletGrid
-from wavestack.pipeline.shack_hartmann.spot_slopes import convert_slopes, slopes, slopes_in_waves_per_radius
-from wavestack.pipeline.shack_hartmann.grid_detection import detect_grid
+from wavestack.pipeline.shack_hartmann.centroids import Centroider, SpotMeasurement
+from wavestack.pipeline.shack_hartmann.lattice import LensletLattice
+from wavestack.pipeline.shack_hartmann.lattice_detection import detect_lattice
+from wavestack.pipeline.shack_hartmann.spot_slopes import convert_slopes, slopes
 from wavestack.pipeline.shack_hartmann.modal import ModalReconstructor
 from wavestack.pipeline.shack_hartmann.zonal import SouthwellReconstructor, southwell_reconstruct
 from wavestack.pipeline.zernike.circle import zernike_basis, zernike_gradient
@@ -53,8 +53,21 @@ FLUX = 20000.0
 BIAS = 100.0
 READ_NOISE = 3.0
 MIN_INTENSITY = 3000.0  # lit lenslets hold >= 12000 thresholded counts, dark ones < 700
-GRID = LensletGrid(pitch_px=25.0, offset_px=(139.5, 11.5), shape=(40, 40))
-ODD_GRID = LensletGrid(pitch_px=24.6, offset_px=(150.3, 20.7), shape=(40, 40))
+SHAPE = (40, 40)  # rows x cols of lenslets
+
+
+def square_array(pitch: float, corner: tuple[float, float], shape: tuple[int, int] = SHAPE) -> LensletLattice:
+    """An axis-aligned square array whose lenslet (0, 0) has its top-left cell corner at ``corner``."""
+    return LensletLattice.array("square", pitch, shape, first_centre_px=(corner[0] + pitch / 2, corner[1] + pitch / 2))
+
+
+def spots_of(frame: np.ndarray, grid: LensletLattice, **options) -> SpotMeasurement:
+    """One frame's spots: a centroider built for its shape, then the measurement."""
+    return Centroider.build(grid, np.shape(frame), **options).measure(frame)
+
+
+GRID = square_array(25.0, (139.5, 11.5))
+ODD_GRID = square_array(24.6, (150.3, 20.7))
 MODES = mode_list("noll", 15)
 TRUTH = np.zeros(15)
 TRUTH[1:11] = [2.0, -1.5, 1.0, 0.5, -0.4, 0.3, 0.2, 0.15, -0.1, 0.2]  # um, Noll 2..11
@@ -66,13 +79,14 @@ ZONAL_MAX_TOL_UM = 0.03
 # --------------------------------------------------------------------------- synthetic sensor
 
 
-def pupil_of(grid: LensletGrid) -> tuple[tuple[float, float], float]:
-    """Pupil inscribed in the grid: centre (col, row) and radius, pixels."""
-    centres = grid.centres()
-    return (float(centres[0, :, 0].mean()), float(centres[:, 0, 1].mean())), 0.5 * grid.pitch_px * min(grid.shape)
+def pupil_of(grid: LensletLattice) -> tuple[tuple[float, float], float]:
+    """Pupil inscribed in the array: centre (col, row) and radius, pixels."""
+    shape = grid.rectangle()
+    centres = grid.centres().reshape(*shape, 2)
+    return (float(centres[0, :, 0].mean()), float(centres[:, 0, 1].mean())), 0.5 * grid.pitch_px * min(shape)
 
 
-def mean_gradient(grid: LensletGrid, coefficients: np.ndarray, order: int = 4) -> tuple[np.ndarray, np.ndarray]:
+def mean_gradient(grid: LensletLattice, coefficients: np.ndarray, order: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """dW/dx, dW/dy (um per pixel, y up) averaged over each lenslet square, shape (L,) each."""
     (col0, row0), radius = pupil_of(grid)
     nodes, weights = np.polynomial.legendre.leggauss(order)
@@ -88,14 +102,14 @@ def mean_gradient(grid: LensletGrid, coefficients: np.ndarray, order: int = 4) -
     return gx, gy
 
 
-def wavefront_at_centres(grid: LensletGrid, coefficients: np.ndarray) -> np.ndarray:
+def wavefront_at_centres(grid: LensletLattice, coefficients: np.ndarray) -> np.ndarray:
     """W (um) at the lenslet centres, shape (L,)."""
     (col0, row0), radius = pupil_of(grid)
     centres = grid.centres().reshape(-1, 2)
     return zernike_basis(MODES, (centres[:, 0] - col0) / radius, -(centres[:, 1] - row0) / radius) @ coefficients
 
 
-def render(grid: LensletGrid, coefficients: np.ndarray, seed: int, patch: int = 13):
+def render(grid: LensletLattice, coefficients: np.ndarray, seed: int, patch: int = 13):
     """Spot frame (uint16), true spot positions (L, 2) (col, row) and lit lenslets (L,)."""
     rng = np.random.default_rng(seed)
     (col0, row0), radius = pupil_of(grid)
@@ -152,67 +166,75 @@ def circle_reconstructor(valid: np.ndarray) -> ModalReconstructor:
 
 
 def test_grid_centres_windows_and_physical_coordinates() -> None:
-    centres = GRID.centres()
-    assert centres.shape == (40, 40, 2)
+    assert GRID.rectangle() == SHAPE and GRID.count == 1600
+    centres = GRID.centres().reshape(*SHAPE, 2)
     assert centres[0, 0].tolist() == [152.0, 24.0]
     assert centres[2, 3].tolist() == [152.0 + 75.0, 24.0 + 50.0]
     xy = GRID.centres_xy()
     assert xy[3 + 2 * 40].tolist() == [227.0, -74.0]  # row-major, y = -row
-    row_starts, col_starts, width = GRID.window_starts()
-    assert width == 25 and col_starts[0] == 140 and row_starts[0] == 12
-    assert np.all(np.diff(col_starts) == 25) and np.all(np.diff(row_starts) == 25)
+    row_starts, col_starts, width = (starts.reshape(SHAPE) if np.ndim(starts) else starts
+                                     for starts in GRID.window_starts())
+    assert width == 25 and col_starts[0, 0] == 140 and row_starts[0, 0] == 12
+    assert np.all(np.diff(col_starts, axis=1) == 25) and np.all(np.diff(row_starts, axis=0) == 25)
+    assert np.all(row_starts == row_starts[:, :1]) and np.all(col_starts == col_starts[:1])  # a block grid
     rows, cols, odd_width = ODD_GRID.window_starts()
     assert odd_width == 24
     # every window lies within its lenslet square, centred to half a pixel
     odd_centres = ODD_GRID.centres()
-    assert np.all(np.abs(cols + 11.5 - odd_centres[0, :, 0]) <= 0.5 + 1e-9)
-    assert np.all(np.abs(rows + 11.5 - odd_centres[:, 0, 1]) <= 0.5 + 1e-9)
+    assert np.all(np.abs(cols + 11.5 - odd_centres[:, 0]) <= 0.5 + 1e-9)
+    assert np.all(np.abs(rows + 11.5 - odd_centres[:, 1]) <= 0.5 + 1e-9)
 
 
 @pytest.mark.parametrize(
     "kwargs, word",
     [
-        (dict(pitch_px=3.0, offset_px=(0.0, 0.0), shape=(2, 2)), "pitch_px"),
-        (dict(pitch_px=float("nan"), offset_px=(0.0, 0.0), shape=(2, 2)), "pitch_px"),
-        (dict(pitch_px=10.0, offset_px=(0.0, float("inf")), shape=(2, 2)), "offset_px"),
-        (dict(pitch_px=10.0, offset_px=(0.0,), shape=(2, 2)), "offset_px"),
-        (dict(pitch_px=10.0, offset_px=(0.0, 0.0), shape=(0, 2)), "shape"),
-        (dict(pitch_px=10.0, offset_px=(0.0, 0.0), shape=(2.0, 2)), "shape"),
+        (dict(pitch_px=3.0, first_centre_px=(0.0, 0.0), shape=(2, 2)), "pitch_px"),
+        (dict(pitch_px=float("nan"), first_centre_px=(0.0, 0.0), shape=(2, 2)), "pitch_px"),
+        (dict(pitch_px=10.0, first_centre_px=(0.0, float("inf")), shape=(2, 2)), "first_centre_px"),
+        (dict(pitch_px=10.0, first_centre_px=(0.0,), shape=(2, 2)), "first_centre_px"),
+        (dict(pitch_px=10.0, first_centre_px=(0.0, 0.0), shape=(0, 2)), "shape"),
+        (dict(pitch_px=10.0, first_centre_px=(0.0, 0.0), shape=(2.5, 2)), "shape"),
     ],
 )
 def test_grid_rejects_bad_fields(kwargs, word) -> None:
     with pytest.raises(ValueError, match=word):
-        LensletGrid(**kwargs)
+        LensletLattice.array("square", **kwargs)
 
 
-def test_detect_grid_on_reference_frame(reference_frame) -> None:
-    frame, _, _ = reference_frame
-    found = detect_grid(frame)
-    assert found.shape == GRID.shape
+def _found_centres_match(found: LensletLattice, grid: LensletLattice, lit: np.ndarray, atol: float) -> None:
+    """One found lenslet per lit lenslet of ``grid``, each centre within ``atol`` px of the true one."""
+    true = grid.centres()[lit]
+    mine = found.centres()
+    nearest = np.argmin(np.hypot(*(mine[:, None, :] - true[None]).transpose(2, 0, 1)), axis=1)
+    assert found.count == lit.sum() and np.unique(nearest).size == found.count
+    assert np.abs(mine - true[nearest]).max() < atol
+
+
+def test_detect_lattice_on_reference_frame(reference_frame) -> None:
+    frame, _, lit = reference_frame
+    found = detect_lattice(frame)
+    assert found.kind == "square"
     assert abs(found.pitch_px - GRID.pitch_px) < 0.1
-    assert np.allclose(found.offset_px, GRID.offset_px, atol=0.1)
-    # the refinement is far better than the requirement
+    _found_centres_match(found, GRID, lit, atol=0.1)
+    # the fit to all spots is far better than the requirement
     assert abs(found.pitch_px - GRID.pitch_px) < 1e-3
 
 
-@pytest.mark.parametrize("guess", [None, 24.0])
-def test_detect_grid_non_integer_pitch(guess) -> None:
-    frame, _, _ = render(ODD_GRID, np.zeros(15), seed=3)
-    found = detect_grid(frame, pitch_px_guess=guess)
-    assert found.shape == ODD_GRID.shape
+def test_detect_lattice_non_integer_pitch() -> None:
+    frame, _, lit = render(ODD_GRID, np.zeros(15), seed=3)
+    found = detect_lattice(frame)
+    assert found.kind == "square"
     assert abs(found.pitch_px - ODD_GRID.pitch_px) < 0.1
-    assert np.allclose(found.offset_px, ODD_GRID.offset_px, atol=0.1)
+    _found_centres_match(found, ODD_GRID, lit, atol=0.1)
 
 
-def test_detect_grid_rejects_bad_input() -> None:
+def test_detect_lattice_rejects_bad_input() -> None:
     with pytest.raises(ValueError, match="2-D"):
-        detect_grid(np.zeros(100))
+        detect_lattice(np.zeros(100))
     with pytest.raises(ValueError, match="finite"):
-        detect_grid(np.full((64, 64), np.nan))
-    with pytest.raises(ValueError, match="pitch_px_guess"):
-        detect_grid(np.zeros((64, 64)), pitch_px_guess=2.0)
+        detect_lattice(np.full((64, 64), np.nan))
     with pytest.raises(ValueError, match="spot"):
-        detect_grid(np.full((64, 64), 7.0))
+        detect_lattice(np.full((64, 64), 7.0))
 
 
 # --------------------------------------------------------------------------- centroiding
@@ -231,18 +253,18 @@ def test_centroids_match_true_spots(grid, seed) -> None:
 def test_dark_lenslets_are_invalid(reference_frame) -> None:
     frame, _, lit = reference_frame
     assert 0 < lit.sum() < lit.size  # the corners are dark
-    measured = centroid_spots(frame, GRID, min_intensity=MIN_INTENSITY)
+    measured = spots_of(frame, GRID, min_intensity=MIN_INTENSITY)
     assert np.array_equal(measured.valid, lit)
     assert measured.intensity[~lit].max() < 0.1 * measured.intensity[lit].min()
     # an aperture mask (pixels) or a lenslet mask removes lenslets regardless of light
     (col0, row0), radius = pupil_of(GRID)
     rows, cols = np.mgrid[: FRAME_SHAPE[0], : FRAME_SHAPE[1]]
     small = np.hypot(cols - col0, rows - row0) <= 0.5 * radius
-    masked = centroid_spots(frame, GRID, min_intensity=MIN_INTENSITY, mask=small)
-    centres = GRID.centres().reshape(-1, 2)
+    masked = spots_of(frame, GRID, min_intensity=MIN_INTENSITY, mask=small)
+    centres = GRID.centres()
     inside = np.hypot(*(np.rint(centres) - [col0, row0]).T) <= 0.5 * radius
     assert np.array_equal(masked.valid, lit & inside)
-    by_lenslet = centroid_spots(frame, GRID, min_intensity=MIN_INTENSITY, mask=inside.reshape(GRID.shape))
+    by_lenslet = spots_of(frame, GRID, min_intensity=MIN_INTENSITY, mask=inside)
     assert np.array_equal(by_lenslet.valid, lit & inside)
 
 
@@ -257,7 +279,7 @@ def test_relative_threshold_ignores_a_camera_offset(reference_frame) -> None:
 
 def test_absolute_threshold_and_float_frames(aberrated_frame) -> None:
     frame, spots, lit = aberrated_frame
-    measured = centroid_spots(
+    measured = spots_of(
         frame.astype(np.float64) - BIAS,
         GRID,
         threshold=30.0,
@@ -273,16 +295,14 @@ def reference_centroids(frame, grid, fraction):
     row_starts, col_starts, width = grid.window_starts()
     out = np.full((grid.count, 2), np.nan)
     total = np.zeros(grid.count)
-    for i, r0 in enumerate(row_starts):
-        for j, c0 in enumerate(col_starts):
-            window = frame[r0 : r0 + width, c0 : c0 + width].astype(np.float64)
-            level = window.mean() + fraction * (window.max() - window.mean())
-            weights = np.clip(window - level, 0.0, None)
-            k = i * grid.shape[1] + j
-            total[k] = weights.sum()
-            if total[k] > 0:
-                rr, cc = np.mgrid[r0 : r0 + width, c0 : c0 + width]
-                out[k] = [(weights * cc).sum() / total[k], (weights * rr).sum() / total[k]]
+    for k, (r0, c0) in enumerate(zip(row_starts, col_starts)):
+        window = frame[r0 : r0 + width, c0 : c0 + width].astype(np.float64)
+        level = window.mean() + fraction * (window.max() - window.mean())
+        weights = np.clip(window - level, 0.0, None)
+        total[k] = weights.sum()
+        if total[k] > 0:
+            rr, cc = np.mgrid[r0 : r0 + width, c0 : c0 + width]
+            out[k] = [(weights * cc).sum() / total[k], (weights * rr).sum() / total[k]]
     return out, total
 
 
@@ -295,10 +315,10 @@ def reference_centroids(frame, grid, fraction):
     seed=st.integers(0, 2**16),
 )
 def test_vectorised_centroids_equal_the_plain_loop(pitch, col, row, fraction, seed) -> None:
-    grid = LensletGrid(pitch_px=pitch, offset_px=(col, row), shape=(3, 4))
+    grid = square_array(pitch, (col, row), (3, 4))
     size = (int(3 * pitch) + 8, int(4 * pitch) + 8)
     frame = np.random.default_rng(seed).integers(0, 4000, size=size).astype(np.uint16)
-    measured = centroid_spots(frame, grid, threshold=fraction)
+    measured = spots_of(frame, grid, threshold=fraction)
     expected, total = reference_centroids(frame, grid, fraction)
     assert np.allclose(measured.intensity, total, rtol=1e-4, atol=1e-2)
     assert np.allclose(measured.centroids, expected, atol=1e-3, equal_nan=True)
@@ -306,7 +326,7 @@ def test_vectorised_centroids_equal_the_plain_loop(pitch, col, row, fraction, se
 
 def test_centroider_rejects_bad_input(reference_frame) -> None:
     frame, _, _ = reference_frame
-    with pytest.raises(ValueError, match="inside the frame"):
+    with pytest.raises(ValueError, match="leave the frame"):
         Centroider.build(GRID, (500, 500))
     with pytest.raises(ValueError, match="threshold"):
         Centroider.build(GRID, FRAME_SHAPE, threshold=1.5)
@@ -326,7 +346,7 @@ def test_centroider_rejects_bad_input(reference_frame) -> None:
     with pytest.raises(ValueError, match="real numbers"):
         centroider.measure(frame > 200)
     with pytest.raises(ValueError, match="2-D"):
-        centroid_spots(frame[None], GRID)
+        centroider.measure(frame[None])
 
 
 # --------------------------------------------------------------------------- slopes and signs
@@ -338,8 +358,8 @@ def test_sign_convention(mode, axis, sign) -> None:
     coefficients = np.zeros(15)
     coefficients[mode] = 1.0  # Noll 2 = 2u (x tilt), Noll 3 = 2v (y tilt), um
     frame, _, lit = render(GRID, coefficients, seed=6)
-    measured = centroid_spots(frame, GRID, min_intensity=MIN_INTENSITY)
-    shift = (measured.centroids - GRID.centres().reshape(-1, 2))[lit]
+    measured = spots_of(frame, GRID, min_intensity=MIN_INTENSITY)
+    shift = (measured.centroids - GRID.centres())[lit]
     expected = 2.0 / pupil_of(GRID)[1] * FOCAL_UM / PIXEL_UM**2  # px of displacement
     # every spot sits at the same sub-pixel phase (0.66 px), so the centroid's S-curve bias
     # (~0.005 px at threshold 0.1) does not average out: 3 % allowed
@@ -355,22 +375,20 @@ def test_sign_convention(mode, axis, sign) -> None:
 
 def test_slopes_units_and_reference_forms(aberrated_frame) -> None:
     frame, _, lit = aberrated_frame
-    measured = centroid_spots(frame, GRID, min_intensity=MIN_INTENSITY)
+    measured = spots_of(frame, GRID, min_intensity=MIN_INTENSITY)
     from_grid = slopes(measured, GRID.centres(), FOCAL_UM, PIXEL_UM)
-    from_flat = slopes(measured, GRID.centres().reshape(-1, 2), FOCAL_UM, PIXEL_UM)
     assert np.array_equal(from_grid.valid, lit)
-    assert np.allclose(from_grid.slopes_x[lit], from_flat.slopes_x[lit])
     assert np.all(np.isnan(from_grid.slopes_x[~lit]))
-    displacement = measured.centroids[lit] - GRID.centres().reshape(-1, 2)[lit]
+    displacement = measured.centroids[lit] - GRID.centres()[lit]
     assert np.allclose(from_grid.slopes_x[lit], displacement[:, 0] * PIXEL_UM / FOCAL_UM)
     assert np.allclose(from_grid.slopes_y[lit], -displacement[:, 1] * PIXEL_UM / FOCAL_UM)
     radius_um = pupil_of(GRID)[1] * PIXEL_UM
-    wx, wy = slopes_in_waves_per_radius(from_grid, 0.6328, radius_um)
+    wx, wy = convert_slopes(from_grid, wavefront_unit_um=0.6328, length_unit_um=radius_um)  # waves per radius
     assert np.allclose(wx[lit], from_grid.slopes_x[lit] * radius_um / 0.6328)
     assert np.allclose(wy[lit], from_grid.slopes_y[lit] * radius_um / 0.6328)
     # a reference measurement combines validity
     reference = SpotMeasurement(
-        centroids=GRID.centres().reshape(-1, 2),
+        centroids=GRID.centres(),
         intensity=np.ones(GRID.count),
         valid=np.arange(GRID.count) % 2 == 0,
     )
@@ -379,7 +397,7 @@ def test_slopes_units_and_reference_forms(aberrated_frame) -> None:
 
 def test_slopes_reject_bad_input(reference_frame) -> None:
     frame, _, _ = reference_frame
-    measured = centroid_spots(frame, GRID)
+    measured = spots_of(frame, GRID)
     with pytest.raises(ValueError, match="reference"):
         slopes(measured, np.zeros((10, 2)), FOCAL_UM, PIXEL_UM)
     with pytest.raises(ValueError, match="focal_length_um"):
@@ -388,8 +406,8 @@ def test_slopes_reject_bad_input(reference_frame) -> None:
         slopes(measured, GRID.centres(), FOCAL_UM, float("nan"))
     with pytest.raises(ValueError, match="measurement"):
         slopes(frame, GRID.centres(), FOCAL_UM, PIXEL_UM)
-    with pytest.raises(ValueError, match="wavelength_um|wavefront_unit_um"):
-        slopes_in_waves_per_radius(slopes(measured, GRID.centres(), FOCAL_UM, PIXEL_UM), -1.0, 1.0)
+    with pytest.raises(ValueError, match="wavefront_unit_um"):
+        convert_slopes(slopes(measured, GRID.centres(), FOCAL_UM, PIXEL_UM), wavefront_unit_um=-1.0, length_unit_um=1.0)
     with pytest.raises(ValueError, match="centroids"):
         SpotMeasurement(centroids=np.zeros(4), intensity=np.zeros(4), valid=np.ones(4, dtype=bool))
 
@@ -507,8 +525,8 @@ def test_modal_reconstructor_rejects_bad_input(aberrated_slopes) -> None:
 
 def test_southwell_matches_truth_up_to_piston(aberrated_slopes) -> None:
     sx, sy, valid = aberrated_slopes
-    phase = southwell_reconstruct(sx, sy, valid.reshape(GRID.shape), GRID.pitch_px)
-    assert phase.shape == GRID.shape
+    phase = southwell_reconstruct(sx, sy, valid.reshape(SHAPE), GRID.pitch_px)
+    assert phase.shape == SHAPE
     assert np.all(np.isnan(phase.ravel()[~valid]))
     truth = wavefront_at_centres(GRID, TRUTH)[valid]
     error = phase.ravel()[valid] - (truth - truth.mean())
@@ -521,10 +539,10 @@ def test_southwell_is_exact_for_quadratic_wavefronts_and_accepts_grids() -> None
     truth = np.zeros(15)
     truth[1:6] = [0.7, -0.2, 0.4, 0.3, -0.1]
     gx, gy = mean_gradient(GRID, truth)
-    valid = np.ones(GRID.shape, dtype=bool)
+    valid = np.ones(SHAPE, dtype=bool)
     reconstructor = SouthwellReconstructor.build(valid, GRID.pitch_px)
     expected = wavefront_at_centres(GRID, truth)
-    phase = reconstructor.reconstruct(gx.reshape(GRID.shape), gy.reshape(GRID.shape))
+    phase = reconstructor.reconstruct(gx.reshape(SHAPE), gy.reshape(SHAPE))
     assert np.allclose(phase.ravel(), expected - expected.mean(), atol=1e-10)
 
 
