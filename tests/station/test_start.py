@@ -56,3 +56,22 @@ def test_processing_past_its_budget_gets_no_heartbeat_and_the_watchdog_trips(sta
     station.run(stop=threading.Event(), on_result=results.append, max_results=1)
     assert devices.plc_simulator is not None
     assert devices.plc_simulator.watchdog_trips == 1  # a stalled pipeline keeps no watchdog alive
+
+
+def test_a_slow_first_surface_analysis_does_not_trip_the_watchdog(station_factory) -> None:
+    config = _config()
+    station, devices = station_factory(replace(config, surface=replace(config.surface, enabled=True)))
+    assert station._surface is not None
+    record, calls = station._surface.record, itertools.count()
+
+    def slow_record(index, waves):  # the first analyzer build, on a loaded machine
+        if next(calls) == 0:
+            time.sleep(FIRST_SET_S)
+        return record(index, waves)
+
+    station._surface.record = slow_record  # type: ignore[method-assign]
+    results = []
+    station.run(stop=threading.Event(), on_result=results.append, max_results=3)
+    assert devices.plc_simulator is not None
+    assert devices.plc_simulator.watchdog_trips == 0  # the loop beat while the figures were taken
+    assert len(results) == 3 and results[-1].result.surface is not None
