@@ -9,7 +9,7 @@ noise added to the pixels (each its own file, hash and fitter builds), generated
 cache directory. Each run starts a local cluster, imports wavestack on every worker (``client.run``)
 and only then times ``run_campaign``: cluster start-up and imports are paid once per campaign, not
 per set. The campaign runs on 1, then 2, then 1 worker again; the 1-worker time is the mean of the
-two (the order and the drift of a shared machine cancel to first order). The baseline is ``build_processor(config, background_builds=False).process`` on the same
+two (the order and the drift of a shared machine cancel to first order). The baseline is ``build_processor(config).process`` on the same
 sets, read into memory beforehand, one fresh processor per recording (as a replay builds one), in
 this process. Printed with ``uptime``'s load: on a shared machine, the ratios of one run are what
 survives, not the absolute rates.
@@ -151,12 +151,9 @@ def stages_alone(paths: list[Path]) -> tuple[float, int]:
             config = parse_station_config(reader.config_toml, source=str(path))
             sets = [[f.pixels for f in reader.read_set(i)] for i in range(reader.n_sets)]
         tick = time.perf_counter()
-        processor = build_processor(config, background_builds=False)
-        try:
-            for frames in sets:
-                processor.process(frames)
-        finally:
-            processor.close()
+        processor = build_processor(config)  # every fitter built at once, as a replay builds them
+        for frames in sets:
+            processor.process(frames)
         seconds += time.perf_counter() - tick
         count += len(sets)
     return seconds, count

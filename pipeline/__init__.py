@@ -7,12 +7,14 @@ face, stacked so that a lower topic never imports a higher one:
 * bottom: :mod:`~wavestack.pipeline.zernike` (index conventions, circle and annular bases, conic
   null), :mod:`~wavestack.pipeline.aperture` (the aperture, detection, tracking, the per-frame
   watch), :mod:`~wavestack.pipeline.formats` (maps, images, MetroPro .dat and .datx);
-* then :mod:`~wavestack.pipeline.phase` (PSI, carrier, unwrapping, the measured wavefront, units);
+* then :mod:`~wavestack.pipeline.phase` (PSI, carrier, the fringe signal, unwrapping, units);
 * then :mod:`~wavestack.pipeline.mapping` (meshes, Laplacians, CSF, QCM and conformal maps);
 * then :mod:`~wavestack.pipeline.fit` (methods, building, the fitter, its store) and
   :mod:`~wavestack.pipeline.shack_hartmann` (the lenslet lattice, centroids, slopes, reconstruction);
-* on top, :mod:`~wavestack.pipeline.instrument` (one processor per instrument kind, the signal
-  path every command calls: ``process(frames) -> outcome``);
+* on top, :mod:`~wavestack.pipeline.instrument`: one processor per instrument kind, the signal path
+  every command calls (``process(frames) -> outcome``: phase, aperture, unwrap, data-quality mask,
+  fit, spike clipping, PV and PVr; spots to slopes to terms), the aperture confirmation table and
+  the fitter-source protocol;
 * beside them, needing nothing but the root: :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
   dwell grid and surface extension, dwell-time solvers);
 * on top: :mod:`~wavestack.pipeline.surface` (ISO form figures and tolerances, PVr, PSD, slope,
@@ -64,15 +66,32 @@ from .fit import (
 from .formats import InputError, load_map, load_mask, read_datx, read_frame, read_frame_set, read_metropro_dat
 from .formats import MeasuredMap, read_4d, read_measured_map, unsupported_reason
 from .mapping import csf_qcm_map
+from .instrument import (
+    CarrierProcessor,
+    FitSettings,
+    FitterChoice,
+    FitterSource,
+    InterferometerOutcome,
+    InterferometerSettings,
+    LensletSlopes,
+    MapStatistics,
+    PhaseShiftingProcessor,
+    PixelQuality,
+    QualitySettings,
+    ShackHartmannProcessor,
+    ShackHartmannSetup,
+    SlopeOutcome,
+    SyncFitterSource,
+    measure_set,
+    processor_for,
+)
 from .phase import (
-    MeasuredWavefront,
     SpatialParams,
     TemporalUnwrapper,
     WavefrontUnits,
     carrier_phase,
     four_step,
     hariharan_five_step,
-    local_fringe_contrast,
     nm_to_phase,
     nm_to_waves,
     phase_from_frames,
@@ -80,8 +99,6 @@ from .phase import (
     phase_to_waves,
     surface_to_wavefront,
     unwrap_spatial,
-    wavefront_from_carrier,
-    wavefront_from_phase_shifts,
     wavefront_to_surface,
     waves_to_nm,
     waves_to_phase,
@@ -112,12 +129,6 @@ from .shack_hartmann import (
     detect_lattice,
     lit_lenslets,
     slopes,
-)
-from .instrument import (
-    LensletSlopes,
-    ShackHartmannProcessor,
-    ShackHartmannSetup,
-    SlopeOutcome,
 )
 from .surface import (
     ArealFilter,
@@ -162,6 +173,19 @@ from .zernike import (
 )
 
 __all__ = [
+    "CarrierProcessor",
+    "FitSettings",
+    "FitterChoice",
+    "FitterSource",
+    "InterferometerOutcome",
+    "InterferometerSettings",
+    "MapStatistics",
+    "PhaseShiftingProcessor",
+    "PixelQuality",
+    "QualitySettings",
+    "SyncFitterSource",
+    "measure_set",
+    "processor_for",
     "mode_name",
     "MappingOptions",
     "Obscuration",
@@ -176,7 +200,6 @@ __all__ = [
     "ModalReconstructor",
     "compare_apertures",
     "ApertureWatch",
-    "local_fringe_contrast",
     "SpatialParams",
     "null_wavefront_waves",
     "four_step",
@@ -198,7 +221,6 @@ __all__ = [
     "MeasuredMap",
     "InputError",
     "InvalidFrame",
-    "MeasuredWavefront",
     "PhysicalTerms",
     "Pupil",
     "TemporalUnwrapper",
@@ -241,8 +263,6 @@ __all__ = [
     "remove_physical_terms",
     "save_fitter",
     "unwrap_spatial",
-    "wavefront_from_carrier",
-    "wavefront_from_phase_shifts",
     "zernike_basis",
     "zernike_gradient",
     "zernike_radial",

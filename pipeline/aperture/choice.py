@@ -6,6 +6,15 @@ optics known to be round: its centre and radius come from the whole rim, not its
 pixels), or a mask the user draws or loads. Whichever is chosen, the edge circle fitted to the
 detection (:func:`~wavestack.pipeline.aperture.edge_circle.fit_edge_circle`) is reported with its
 uncertainty when the aperture is round enough to give one.
+
+The detected aperture is cut to that circle when the circle holds all of it but a sliver: at most
+:data:`EDGE_SLIVER` of its pixels lie outside. Such a sliver is halo the detection joined at the
+rim, typically where the rim meets the frame's border (the signal's filter there reaches the disk
+from a halo strip thinner than its support): on the bundled carrier frame 0.9 % of the detected
+pixels, a bump 15 px beyond the 284.5 px edge that made the enclosing circle, and so the fit's
+pupil, 295 px. An aperture the circle does not hold (not round: a rectangle, a strip) is kept as
+detected. The rule is ours, not a source's: a round optic's own edge bounds its pixels, and a
+sliver beyond it is not the optic.
 """
 
 from __future__ import annotations
@@ -21,11 +30,13 @@ from .detect import DetectedAperture, DetectionSettings, detect_aperture
 from .edge_circle import EdgeCircle, EdgeFitError, fit_edge_circle
 from .region import Aperture
 
-__all__ = ["APERTURE_CHOICES", "ChosenAperture", "choose_aperture"]
+__all__ = ["APERTURE_CHOICES", "EDGE_SLIVER", "ChosenAperture", "choose_aperture"]
 
 logger = logging.getLogger(__name__)
 
 APERTURE_CHOICES = ("detected", "circle")
+#: Largest share of a detected aperture outside its edge circle that is cut off as halo (module notes).
+EDGE_SLIVER = 0.02
 
 
 @dataclass(frozen=True, eq=False)
@@ -63,7 +74,8 @@ def choose_aperture(
     signal_map : NDArray, shape (rows, cols)
         Modulation or local fringe-contrast map.
     choice : {"detected", "circle"} or array_like of shape (rows, cols)
-        ``"detected"``: :func:`detect_aperture` as it is (any shape). ``"circle"``: the pixels whose
+        ``"detected"``: :func:`detect_aperture` (any shape), cut to its edge circle when that holds
+        all but a sliver of it (module notes). ``"circle"``: the pixels whose
         centres lie inside the circle fitted to the detected edge, less the detection's holes
         (real obscurations). An array: the user's mask (non-zero = valid).
     detection : DetectionSettings
@@ -106,11 +118,23 @@ def choose_aperture(
         logger.info("no edge circle for the detected aperture: %s", error)
         edge = None
     aperture = detected.aperture
+    if choice == "detected" and edge is not None:
+        aperture = _cut_to_edge(aperture, edge)
     if choice == "circle":
         assert edge is not None
         circle = edge.mask(shape) & ~_holes(detected.aperture.mask)
         aperture = Aperture.from_mask(circle, min_hole_area_px=aperture.min_hole_area_px)
     return ChosenAperture(aperture, choice, edge, detected)
+
+
+def _cut_to_edge(aperture: Aperture, edge: EdgeCircle) -> Aperture:
+    """The aperture less a sliver of halo beyond its edge circle, or as it is (module notes)."""
+    inside = edge.mask(aperture.mask.shape)
+    outside = int(np.count_nonzero(aperture.mask & ~inside))
+    if outside == 0 or outside > EDGE_SLIVER * aperture.valid_count:
+        return aperture
+    logger.debug("detected aperture cut to its edge circle: %d of %d pixels beyond it", outside, aperture.valid_count)
+    return Aperture.from_mask(aperture.mask & inside, min_hole_area_px=aperture.min_hole_area_px)
 
 
 def _holes(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:

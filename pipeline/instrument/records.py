@@ -1,8 +1,9 @@
 """The small frozen records an instrument processor's outcome carries into a result.
 
 :class:`ApertureRecord` says which aperture a result was measured on (an interferometer's
-detected aperture, a Shack-Hartmann sensor's set of lit lenslets); :class:`ReconstructorDiagnostics`
-a Shack-Hartmann reconstructor's figures. Each has a ``to_json`` giving the keys the station's
+detected aperture, a Shack-Hartmann sensor's set of lit lenslets); :class:`FitDiagnostics` an
+interferometer fitter's figures, :class:`ReconstructorDiagnostics` a Shack-Hartmann
+reconstructor's. Each has a ``to_json`` giving the keys the station's
 JSON lines and recordings carry.
 """
 
@@ -46,6 +47,18 @@ class ApertureRecord:
             record["valid_lenslets"] = self.valid_lenslets
         record["valid_pixels"] = self.valid_pixels
         return record
+
+
+@dataclass(frozen=True)
+class FitDiagnostics:
+    """A mapped or QR fitter's figures: Gram condition number, map fold-overs, largest Beltrami coefficient."""
+
+    gram_condition: float | None
+    flips: int | None
+    max_beltrami: float | None
+
+    def to_json(self) -> dict[str, object]:
+        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,7 @@ from ..zernike import mode_list
 from .lenslet_geometry import LensletGeometry, lenslet_geometry
 from .records import ApertureRecord, ReconstructorDiagnostics
 from .sensor_setup import ShackHartmannSetup
+from .statistics import MapStatistics
 
 logger = logging.getLogger(__name__)
 
@@ -134,6 +135,12 @@ class SlopeOutcome:
     normalisation = "rms"
     unwrap_path = None
     new_aperture_mask = None  # the lit set is in the result's aperture record; no mask is recorded
+    quality = None  # no per-lenslet quality counts yet
+
+    @property
+    def statistics(self) -> MapStatistics:
+        """The residual's RMS and PV; the wavefront's PV and PVr are not computed from slopes yet (NaN)."""
+        return MapStatistics(self.residual_rms, self.residual_pv, math.nan, math.nan)
 
 
 @dataclass(frozen=True, eq=False)
@@ -252,9 +259,6 @@ class ShackHartmannProcessor:
     def builds(self) -> int:
         """Reconstructors built so far."""
         return self.reconstructors.builds
-
-    def close(self) -> None:
-        """Nothing runs in the background; for symmetry with the interferometer's processor."""
 
     def process(self, frames: Sequence[NDArray[np.generic]], *, fitter_method: str | None = None) -> SlopeOutcome:
         """Process one spot frame.

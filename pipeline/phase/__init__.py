@@ -1,17 +1,9 @@
-"""Phase: PSI and carrier demodulation, spatial and temporal unwrapping, the measured wavefront, and
-units.
-"""
+"""Phase: PSI and carrier demodulation, the fringe signal, spatial and temporal unwrapping, and units."""
 
 from __future__ import annotations
 
 from .carrier import CarrierResult, carrier_phase
-from .measurement import (
-    MeasuredWavefront,
-    check_fringe_modulation,
-    local_fringe_contrast,
-    wavefront_from_carrier,
-    wavefront_from_phase_shifts,
-)
+from .fringe_signal import NO_MODULATION, check_fringe_modulation, contrast_box, fringe_energy
 from .psi import (
     PhaseResult,
     advanced_iterative_psi,
@@ -37,7 +29,7 @@ from .units import (
 
 __all__ = [
     "CarrierResult",
-    "MeasuredWavefront",
+    "NO_MODULATION",
     "PhaseResult",
     "SpatialParams",
     "TemporalUnwrapper",
@@ -45,11 +37,12 @@ __all__ = [
     "WavefrontUnits",
     "advanced_iterative_psi",
     "carrier_phase",
+    "contrast_box",
     "count_residues",
     "four_step",
+    "fringe_energy",
     "hariharan_five_step",
     "least_squares_psi",
-    "local_fringe_contrast",
     "nm_to_phase",
     "nm_to_waves",
     "pca_psi",
@@ -58,8 +51,6 @@ __all__ = [
     "phase_to_waves",
     "surface_to_wavefront",
     "unwrap_spatial",
-    "wavefront_from_carrier",
-    "wavefront_from_phase_shifts",
     "check_fringe_modulation",
     "wavefront_to_surface",
     "waves_to_nm",

@@ -11,7 +11,9 @@ The fit is the project's fitter (``build_fitter``, the 36 Fringe terms over the 
 circle orthonormalised on the measured pixels: method ``qr``, whose fitted surface is the
 circle polynomials' least-squares fit however poorly they are conditioned on the area, e.g. a
 long strip), built once per measured area; every command that reports PVr (analyze, fit, the
-station, polishing) calls :class:`RobustPVAnalyzer` for it.
+station, polishing, the instrument processors) calls :class:`RobustPVAnalyzer` for it. A map
+that left some of the area's pixels out (an interferometer's data-quality mask, spike clipping)
+is measured on the rest without a new fitter (``nan_policy="omit"``: the fitter's downdate).
 
 References
 ----------
@@ -24,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, DTypeLike
 
 from ..aperture import Aperture
 from ..fit import build_fitter
@@ -61,6 +63,16 @@ class RobustPVAnalyzer:
     Parameters
     ----------
     area : MeasuredArea
+    remove : {"ptt", "pttp"} or None
+        The physical terms removed before the fit (the figures of a map reported less power
+        remove power too); default piston and tilt.
+    dtype : numpy dtype
+        The fit's dtype (float64; float32 halves the stored operator of a large area).
+
+    Raises
+    ------
+    IllConditionedBasis
+        If the area cannot carry the 36 terms.
 
     Examples
     --------
@@ -78,26 +90,38 @@ class RobustPVAnalyzer:
     (511, 44)
     """
 
-    def __init__(self, area: MeasuredArea) -> None:
+    def __init__(self, area: MeasuredArea, *, remove: str | None = "ptt", dtype: DTypeLike = np.float64) -> None:
         self.area = area
         self._fitter = build_fitter(Aperture.from_mask(area.valid), method="qr", modes=PVR_MODES,
-                                    ordering="fringe", pupil=area.pupil, dtype=np.float64, remove="ptt")
+                                    ordering="fringe", pupil=area.pupil, dtype=dtype, remove=remove)
 
-    def measure(self, surface: ArrayLike) -> RobustPV:
+    def measure(self, surface: ArrayLike, *, nan_policy: str = "raise") -> RobustPV:
         """PVr of a map.
 
         Parameters
         ----------
         surface : array_like, shape (rows, cols)
-            Finite on every measured pixel; other pixels are ignored. Any unit.
+            Finite on every measured pixel (or NaN where left out, with ``nan_policy="omit"``);
+            pixels off the area are ignored. Any unit.
+        nan_policy : {"raise", "omit"}
+            ``"omit"``: the area's pixels that are not finite are left out of the fit and of the
+            fitted surface's PV.
 
         Raises
         ------
         ValueError
-            If the map's shape differs from the area's or a measured pixel is not finite.
+            If the map's shape differs from the area's, or a measured pixel is not finite and
+            ``nan_policy`` is ``"raise"``.
+        InvalidFrame
+            If too few finite pixels are left to fit (``"omit"``).
         """
-        self.area.values(surface)  # every measured pixel finite, the shape the area's
-        result = self._fitter.fit(np.asarray(surface))  # the fitter reads the measured pixels only
+        surface = np.asarray(surface)
+        if nan_policy == "raise":
+            self.area.values(surface)  # every measured pixel finite, the shape the area's
+        elif surface.shape != self.area.shape:
+            raise ValueError(f"surface: expected a map of shape {self.area.shape}, got {surface.shape}")
+        result = self._fitter.fit(surface, nan_policy=nan_policy)  # the fitter reads the measured pixels only
         fitted = self._fitter.surface(result.coefficients)
-        fit_pv = float(np.nanmax(fitted) - np.nanmin(fitted))
+        used = fitted[np.isfinite(surface) & self.area.valid]
+        fit_pv = float(used.max() - used.min())
         return RobustPV(pvr=fit_pv + 3.0 * result.residual_rms, fit_pv=fit_pv, residual_rms=result.residual_rms)

@@ -97,7 +97,7 @@ def test_drop_outs_and_isolated_pixels_are_counted_not_invented(capsys, tmp_path
     path, saved = tmp_path / "d.datx", tmp_path / "analysed.npy"
     _write_datx(path, surface)
     valid = np.isfinite(surface)
-    report = _run(capsys, "analyze", str(path), "--modes", "15", "--save-map", str(saved))
+    report = _run(capsys, "analyze", str(path), "--modes", "15", "--save-map", str(saved), "--no-clip")
     pixels = report["pixels"]
     assert pixels["measured"] == pixels["fitted"] == int(valid.sum())
     assert pixels["dropouts_inside_aperture"] == len(dropouts)
@@ -105,6 +105,11 @@ def test_drop_outs_and_isolated_pixels_are_counted_not_invented(capsys, tmp_path
     assert pixels["outside_detected_outline"] >= 2
     assert report["aperture"]["valid_pixels"] == int(valid.sum())
     assert np.array_equal(np.isfinite(np.load(saved)), valid)  # exactly the file's pixels
+    # with spike clipping (the default) the two isolated pixels, 1 wave off the surface, are spikes:
+    # left out of the fit and of the saved map, and counted
+    clipped = _run(capsys, "analyze", str(path), "--modes", "15", "--save-map", str(saved))
+    assert clipped["quality"]["clipped"] == 2 and clipped["pixels"]["fitted"] == int(valid.sum()) - 2
+    assert not np.isfinite(np.load(saved)[[50, 3], [97, 50]]).any()
 
 
 @require_shared_data()
@@ -112,12 +117,12 @@ def test_zygo_file_fits_exactly_its_valid_pixels(capsys, tmp_path) -> None:
     path = DATA / "zygo-dat" / "valid_zygo_dat_file.dat"
     valid = np.isfinite(read_metropro_dat(path).phase_nm)  # the file's validity, counted here
     saved = tmp_path / "analysed.npy"
-    report = _run(capsys, "analyze", str(path), "--modes", "15", "--save-map", str(saved))
+    report = _run(capsys, "analyze", str(path), "--modes", "15", "--save-map", str(saved), "--no-clip")
     assert report["pixels"]["measured"] == report["pixels"]["fitted"] == int(valid.sum())
     assert report["aperture"]["valid_pixels"] == int(valid.sum())
     assert np.array_equal(np.isfinite(np.load(saved)), valid)
     assert report["fit_method"] == "circle"  # a round part: auto keeps the circle basis
-    main(["analyze", str(path), "--modes", "15"])
+    main(["analyze", str(path), "--modes", "15", "--no-clip"])
     text = capsys.readouterr().out
     assert f"pixels      {int(valid.sum())} measured, {int(valid.sum())} fitted, " in text
 

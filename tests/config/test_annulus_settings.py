@@ -10,8 +10,7 @@ import pytest
 from wavestack.config import DEFAULT_CONFIG
 from wavestack.config.schema import ConfigError
 from wavestack.config.station import parse_station_config
-from wavestack.pipeline import Aperture
-from wavestack.station.fitter_cache import FitterCache
+from wavestack.pipeline import Aperture, SyncFitterSource
 
 DEFAULT_TEXT = DEFAULT_CONFIG.read_text(encoding="utf-8")
 SOURCE = "annulus.toml"
@@ -36,11 +35,7 @@ def test_the_station_builds_annulus_fitters_with_the_configured_obscuration(give
     config = parse_station_config(_processing(fit_method='"annulus"', **extra), source=SOURCE)
     settings = config.processing.fit_settings()
     assert settings.method == "annulus" and settings.obscuration == given
-    cache = FitterCache(settings, background=False)  # replay's synchronous builds
-    try:
-        choice = cache.new_aperture(Aperture.from_mask(_ring()))
-    finally:
-        cache.close()
+    choice = SyncFitterSource(settings).new_aperture(Aperture.from_mask(_ring()))  # replay's synchronous builds
     assert choice.kind == "annulus" and not choice.fallback
     basis = choice.fitter.basis
     if given is None:  # measured: the nearest ring pixel centre, about 12 px of about 36

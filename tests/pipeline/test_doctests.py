@@ -26,6 +26,12 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.fit.run_refit",  # RunRefit
     "wavestack.pipeline.phase.psi.algorithms",  # phase_from_frames
     "wavestack.pipeline.phase.units",  # phase_to_waves, waves_to_nm, WavefrontUnits
+    "wavestack.pipeline.instrument.fitter_source",  # build_configured, SyncFitterSource
+    "wavestack.pipeline.instrument.quality",  # mark_quality
+    "wavestack.pipeline.instrument.statistics",  # robust_pv
+    "wavestack.pipeline.instrument.phase_shifting",  # PhaseShiftingProcessor
+    "wavestack.pipeline.instrument.carrier",  # CarrierProcessor
+    "wavestack.pipeline.instrument.streams",  # measure_set
     "wavestack.pipeline.shack_hartmann.lattice",  # LensletLattice
     "wavestack.pipeline.shack_hartmann.lattice_detection",  # detect_lattice
     "wavestack.pipeline.shack_hartmann.lit",  # lit_lenslets

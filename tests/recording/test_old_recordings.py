@@ -1,10 +1,11 @@
-"""Recordings made before results carried ``residual_pv`` and the frame and set counters still read
-and replay.
+"""Recordings made before results carried ``residual_pv``, the frame and set counters and (format
+version 3) PV, PVr and the data-quality counts still read and replay.
 
 The file is written here, by the same :class:`RecordingWriter`, with the result columns the station
 wrote until then (``COLUMNS_BEFORE_COUNTERS``), on frames of the simulated station, so replay has
-real sets to recompute. A file kept from an older wavestack
-would hold several megabytes of frames; the writer and the layout did not change, only the row.
+real sets to recompute, and stamped with format version 2 (its header checksum made again). A file
+kept from an older wavestack would hold several megabytes of frames; the writer and the layout did
+not change, only the row and the version.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import json
 import threading
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
@@ -21,7 +23,7 @@ from wavestack.cli import main
 from wavestack.config import StationConfig, load_station_config
 from wavestack.recording import FRAME_METADATA, RecordingReader, RecordingWriter, conventions, recorded_config
 from wavestack.recording import recording_row, replay
-from wavestack.recording.format import RowValue
+from wavestack.recording.format import RowValue, header_crc32
 from wavestack.station import Counters, CycleRecord, StationResult
 
 SMALL = Path(__file__).resolve().parents[1] / "configs" / "station-small.toml"
@@ -61,6 +63,9 @@ def _old_recording(path: Path, config: StationConfig, station_factory) -> list[S
         station.run(stop=threading.Event(), on_result=record, max_results=4)
     finally:
         writer.close()
+    with h5py.File(path, "r+") as file:  # as version 2 wrote it: the same layout and checksums
+        file.attrs["format_version"] = 2
+        file.attrs["header_crc32"] = header_crc32(file.attrs, file["conventions"].attrs)
     return live
 
 
@@ -71,7 +76,10 @@ def test_the_new_row_only_adds_columns() -> None:
     new = recording_row(empty, modes, fps)
     assert set(new) - set(COLUMNS_BEFORE_COUNTERS) == {
         "residual_pv", "frames_acquired", "frames_processed", "frames_dropped", "frames_pending", "sets_assembled",
-        "sets_processed", "sets_dropped", "sets_pending"}
+        "sets_processed", "sets_dropped", "sets_pending",
+        # format version 3: the robust figures and the data-quality counts
+        "pv", "pvr", "quality_inside", "quality_used", "quality_low_modulation", "quality_saturated",
+        "quality_untrusted_order", "quality_clipped", "quality_rim"}
     assert set(COLUMNS_BEFORE_COUNTERS) <= set(new)
 
 
@@ -81,7 +89,9 @@ def test_an_old_recording_reads_and_replays(station_factory, tmp_path: Path, cap
     live = _old_recording(path, config, station_factory)
     with RecordingReader(path) as reader:
         table = reader.results()
-        assert "residual_pv" not in table and "frames_acquired" not in table and reader.n_results == 4
+        assert reader.format_version == 2 and not reader.damage
+        assert "residual_pv" not in table and "frames_acquired" not in table and "pvr" not in table
+        assert reader.n_results == 4
         replayed = list(replay(reader, recorded_config(reader, path), same_settings=True))
     with_sets = [r for r in live if r.frame_ids]  # 4, unless a loaded machine lost a set
     compared = sum(r.valid for r in with_sets)
@@ -89,7 +99,7 @@ def test_an_old_recording_reads_and_replays(station_factory, tmp_path: Path, cap
     for again, original in zip(replayed, with_sets, strict=True):
         if original.valid:
             np.testing.assert_allclose(again.processed.coefficients_waves, original.coefficients, rtol=0, atol=1e-12)
-            assert again.processed.residual_pv > 0  # the replay computes it
+            assert again.processed.residual_pv > 0 and again.processed.statistics.pvr > 0  # the replay computes them
         assert again.recorded_residual_pv is None and again.residual_pv_difference is None  # nothing to compare
 
     assert main(["replay", str(path)]) == 0

@@ -17,7 +17,8 @@ import math
 import numpy as np
 import pytest
 
-from wavestack.pipeline import build_fitter, phase_from_frames, unwrap_spatial, wavefront_from_phase_shifts
+from wavestack.pipeline import FitSettings, InterferometerOutcome, InterferometerSettings, measure_set
+from wavestack.pipeline import build_fitter, phase_from_frames, unwrap_spatial
 from wavestack.pipeline import wavefront_to_surface
 from wavestack.simulators import SurfaceSettings
 from wavestack.simulators.optic import ApertureShape, OpticSettings, OpticTruth, TestOptic
@@ -31,6 +32,12 @@ PIXEL_TOL_WAVES = 1e-5
 PIXEL_TOL_NM = PIXEL_TOL_WAVES * WAVELENGTH_NM / 2.0
 SURFACE = SurfaceSettings(zernike_nm=(0.0, 0.0, 0.0, 40.0, 0.0, 0.0, 0.0, 12.0), roughness_rms_nm=3.0,
                           roughness_correlation_mm=0.8, pixel_mm=0.1, seed=2, wavelength_nm=WAVELENGTH_NM)
+
+def measured_set(frames: np.ndarray, method: str = "psi") -> InterferometerOutcome:
+    """Frames through the processor every command runs (analyze's least squares, or the carrier method)."""
+    settings = InterferometerSettings(method=method, fit=FitSettings(method="circle", modes=11, dtype="float64"))
+    return measure_set(list(frames), settings)
+
 
 
 def optic_with(surface: SurfaceSettings | None = SURFACE, **changes) -> TestOptic:
@@ -73,7 +80,7 @@ def test_surface_zernike_terms_use_the_optic_normalisation() -> None:
                        zernike_waves=(0.0, 0.0, 0.0, 0.1))
     frames = np.stack([optic.interferogram(0.0, step)[0] for step in STEPS])
     truth = optic.truth(0.0)
-    measured = wavefront_from_phase_shifts(frames, method="lsq")
+    measured = measured_set(frames)
     fitter = build_fitter(measured.aperture, modes=11, dtype=np.float64, pupil=truth.pupil_px)
     coefficients = fitter.fit(measured.waves, nan_policy="omit").coefficients
     expected = np.zeros(11)

@@ -13,6 +13,7 @@ import pytest
 from wavestack.config import OutputSettings
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.plc import MachineOutputs
+from wavestack.pipeline import InterferometerOutcome
 from wavestack.station import (
     ApertureRecord,
     Counters,
@@ -20,7 +21,6 @@ from wavestack.station import (
     FitDiagnostics,
     FrameCounts,
     Heartbeat,
-    InterferometerOutcome,
     OutputRecord,
     PlcOutput,
     ReconstructorDiagnostics,

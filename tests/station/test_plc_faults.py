@@ -22,7 +22,8 @@ import pytest
 from wavestack.config import StationConfig, load_station_config
 from wavestack.drivers.plc import decode_float32_array
 from wavestack.simulators.plc import PlcSimulator
-from wavestack.station import CycleRecord, InterferometerOutcome, StationResult
+from wavestack.pipeline import InterferometerOutcome
+from wavestack.station import CycleRecord, StationResult
 
 SMALL = Path(__file__).resolve().parents[1] / "configs" / "station-small.toml"
 MAX_REMOVAL_NM, MAX_STEP_NM = 20.0, 5.0

@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 
 from wavestack.config import ProcessingSettings
-from wavestack.station import SetBatch, SetProcessor
+from wavestack.pipeline import SyncFitterSource, processor_for
+from wavestack.station import SetBatch
+
+
+def _processor(settings: ProcessingSettings):  # type: ignore[no-untyped-def]
+    interferometer = settings.interferometer()
+    return processor_for(interferometer, SyncFitterSource(interferometer.fit))
 
 
 def _dark(count: int) -> list[np.ndarray]:
@@ -20,14 +26,11 @@ def _dark(count: int) -> list[np.ndarray]:
                                                           ("carrier", True, False)])
 def test_what_waits_for_a_batched_fit(method: str, batched: bool, waits: bool) -> None:
     settings = replace(ProcessingSettings(), method=method)
-    processor = SetProcessor(settings, background_builds=False)
-    try:
-        batch: SetBatch[int] = SetBatch(processor, batched=batched)
-        frames = _dark(settings.frames_per_set)
-        early = [done for tag in range(3) for done in batch.add(frames, tag)]
-        late = batch.flush()
-    finally:
-        processor.close()
+    processor = _processor(settings)
+    batch: SetBatch[int] = SetBatch(processor, batched=batched)
+    frames = _dark(settings.frames_per_set)
+    early = [done for tag in range(3) for done in batch.add(frames, tag)]
+    late = batch.flush()
     assert [tag for tag, _ in early + late] == [0, 1, 2]  # in order, each once
     assert (len(early), len(late)) == ((0, 3) if waits else (3, 0))
     stages = {outcome.reason.split(":")[0] for _, outcome in early + late if not outcome.valid}
@@ -35,9 +38,5 @@ def test_what_waits_for_a_batched_fit(method: str, batched: bool, waits: bool) -
 
 
 def test_a_group_size_below_one_is_refused() -> None:
-    processor = SetProcessor(ProcessingSettings(), background_builds=False)
-    try:
-        with pytest.raises(ValueError, match="group_sets"):
-            SetBatch(processor, group_sets=0)
-    finally:
-        processor.close()
+    with pytest.raises(ValueError, match="group_sets"):
+        SetBatch(_processor(ProcessingSettings()), group_sets=0)

@@ -107,6 +107,8 @@ class StationMaps:
     def average(self, count: int, not_before_ns: int, timeout_s: float) -> NDArray[np.float64]:
         """The mean of ``count`` valid maps in a row exposed at or after ``not_before_ns``, waves (H, W).
 
+        A pixel left out of a map (NaN) is the mean of the maps that measured it; NaN if none did.
+
         Raises
         ------
         UntrustedMeasurement
@@ -114,7 +116,10 @@ class StationMaps:
         """
         samples = self._maps.collect(count, max_results=count * 4, not_before_ns=not_before_ns,
                                      timeout_s=timeout_s, stop=self._stop)
-        return np.mean([np.asarray(s.waves, dtype=np.float64) for s in samples], axis=0)
+        maps = np.stack([np.asarray(s.waves, dtype=np.float64) for s in samples])
+        measured = np.isfinite(maps).sum(axis=0)  # a pixel the quality mask left out of a map: the others'
+        total = np.where(np.isfinite(maps), maps, 0.0).sum(axis=0)
+        return np.divide(total, measured, out=np.full(total.shape, np.nan), where=measured > 0)
 
 
 class StationSource:

@@ -7,7 +7,7 @@ of the real station on its simulated devices measures:
 * results per second and latency p50/p99 over ``N`` results, after a warm-up that ends once
   results come from the configured fitter (no longer the ``qr`` stand-in) of the first aperture;
 * the mean time per stage (``StationResult.timings_ms``) and the per-result time ``1 / rate``;
-  then the same stages alone: :meth:`SetProcessor.process` in a loop on sets recorded during the
+  then the same stages alone: the station's processor's ``process`` in a loop on sets recorded during the
   run, with no device running. ``per-result time / alone stage sum`` is the overhead the station
   adds (target <= 1.5);
 * the simulator's share of the process CPU time. Camera: the thread CPU time
@@ -47,7 +47,7 @@ from wavestack.bench.station_figures import STAGES, MachineState, StationPathFig
 from wavestack.config import StationConfig
 from wavestack.drivers.errors import DeviceError
 from wavestack.simulators.optic import ApertureShape
-from wavestack.station import CycleRecord, SetProcessor, Station, StationDevices, StationResult, open_station_devices
+from wavestack.station import CycleRecord, Station, StationDevices, StationResult, build_processor, open_station_devices
 
 logger = logging.getLogger(__name__)
 
@@ -175,20 +175,17 @@ class _PathRun:
 def _stage_benchmark(config: StationConfig, sets: Sequence[Sequence[NDArray[Any]]],
                      runs: int) -> tuple[dict[str, float], float]:
     """Mean ms per stage and per ``process`` call of a fresh processor on recorded sets, no devices."""
-    processor = SetProcessor(config.processing, background_builds=False)
+    processor = build_processor(config)  # the station's processor, its fitters built at once
     totals = dict.fromkeys(STAGES, 0.0)
     wall, valid = 0.0, 0
-    try:
-        processor.process(sets[0])  # aperture detection and the synchronous fitter build
-        for index in range(runs):
-            tick = time.perf_counter()
-            processed = processor.process(sets[index % len(sets)])
-            wall += time.perf_counter() - tick
-            valid += processed.valid
-            for stage in STAGES:
-                totals[stage] += processed.timings_s.get(stage, 0.0) if processed.valid else 0.0
-    finally:
-        processor.close()
+    processor.process(sets[0])  # aperture detection and the synchronous fitter build
+    for index in range(runs):
+        tick = time.perf_counter()
+        processed = processor.process(sets[index % len(sets)])
+        wall += time.perf_counter() - tick
+        valid += processed.valid
+        for stage in STAGES:
+            totals[stage] += processed.timings_s.get(stage, 0.0) if processed.valid else 0.0
     return {stage: totals[stage] * 1e3 / max(valid, 1) for stage in STAGES}, wall * 1e3 / runs
 
 

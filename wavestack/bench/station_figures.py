@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-STAGES = ("phase", "aperture", "unwrap", "fit")
+STAGES = ("phase", "aperture", "unwrap", "quality", "fit", "clip", "statistics")
 TARGET_RESULTS_PER_S = 20.0  # carrier path
 TARGET_P99_MS = 150.0  # carrier path
 TARGET_NEW_MAP_S = 1.0
@@ -24,7 +24,7 @@ class StationPathFigures:
     configured fitter of the first aperture was in use. ``results_per_s`` over the measured
     results, ``per_result_ms = 1000 / results_per_s``, latency percentiles from the first frame's
     arrival. ``stage_ms`` / ``stage_median_ms``: mean / median per stage in the station;
-    ``alone_stage_ms``: mean per stage of ``SetProcessor.process`` alone (``alone_runs`` calls,
+    ``alone_stage_ms``: mean per stage of the processor's ``process`` alone (``alone_runs`` calls,
     ``alone_process_ms`` per call); ``overhead_ratio = per_result_ms / sum(alone_stage_ms)``;
     ``outside_stages_ms = per_result_ms - sum(stage_ms)`` (truth comparison, PLC, waiting for a
     set), of which ``plc_io_ms`` (wall time in the PLC link's calls, ``plc_requests_per_result``

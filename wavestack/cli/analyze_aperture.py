@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from wavestack.pipeline import APERTURE_CHOICES, Aperture, InputError, MeasuredWavefront, load_mask
+from wavestack.pipeline import APERTURE_CHOICES, InputError, InterferometerOutcome, load_mask
 
 
 def add_aperture_arguments(parser: argparse.ArgumentParser) -> None:
@@ -26,8 +26,8 @@ def add_aperture_arguments(parser: argparse.ArgumentParser) -> None:
                         help="analyse this mask instead (.npy or image, non-zero = valid, the frames' size)")
 
 
-def aperture_choice(args: argparse.Namespace, shape: tuple[int, int]) -> str | np.ndarray:
-    """What ``wavefront_from_*`` is given as ``aperture``: a choice name or the loaded ``--mask``.
+def aperture_mask(args: argparse.Namespace, shape: tuple[int, int]) -> np.ndarray | None:
+    """The loaded ``--mask`` (None without one: ``--aperture`` names the choice).
 
     Raises
     ------
@@ -36,7 +36,7 @@ def aperture_choice(args: argparse.Namespace, shape: tuple[int, int]) -> str | n
         of another shape than the frames, or has no valid pixel.
     """
     if args.mask is None:
-        return str(args.aperture)
+        return None
     if args.aperture != "detected":
         raise InputError(f"{args.mask}: --mask and --aperture {args.aperture} exclude each other; give one")
     mask = load_mask(args.mask, shape=shape)
@@ -58,18 +58,19 @@ def refuse_for_measured_map(args: argparse.Namespace, path: object) -> None:
                          "a measured map's file says which pixels are valid")
 
 
-def aperture_report(measured: MeasuredWavefront) -> dict[str, Any]:
+def aperture_report(outcome: InterferometerOutcome) -> dict[str, Any]:
     """The JSON ``aperture`` object (centre and radius in pixels, column then row)."""
-    aperture: Aperture = measured.aperture
+    aperture = outcome.aperture
+    assert aperture is not None
     cx, cy, radius = aperture.enclosing_circle()
     rows, cols = np.nonzero(aperture.mask)
     report: dict[str, Any] = {
-        "choice": measured.aperture_choice,
+        "choice": outcome.aperture_choice,
         "centre": [cx, cy], "radius": radius,
         "bbox": [int(cols.min()), int(rows.min()), int(cols.max()), int(rows.max())],
         "topology": aperture.topology.value, "valid_pixels": int(aperture.valid_count),
     }
-    edge = measured.edge
+    edge = outcome.edge
     if edge is not None:
         report["edge_circle"] = {
             "centre": [edge.cx, edge.cy], "radius": edge.radius,

@@ -23,7 +23,7 @@ import numpy as np
 
 from wavestack.cli.arguments import positive_finite_float
 from wavestack.cli.outputs import json_text
-from wavestack.config import load_station_config
+from wavestack.config import ConfigError, load_station_config
 from wavestack.pipeline import InputError, mode_list, mode_name, normalisation_factor, default_normalisation
 from wavestack.pipeline import read_frame
 from wavestack.pipeline.instrument import ShackHartmannProcessor, ShackHartmannSetup, SlopeOutcome
@@ -40,9 +40,6 @@ def add_shack_hartmann_arguments(parser: argparse.ArgumentParser) -> None:
     """Declare the Shack-Hartmann options of ``wavestack analyze``."""
     group = parser.add_argument_group("Shack-Hartmann spot images (one FILE; a station file, a reference or a "
                                       "lenslet pitch)")
-    group.add_argument("--config", metavar="STATION.toml",
-                       help="a Shack-Hartmann station's file: FILE is processed as the live station processes "
-                            "its frames ([shack_hartmann], wavelength, modes)")
     group.add_argument("--reference", metavar="REF", help="spot image of a flat wavefront: slopes are the spot "
                                                           "displacements against its spots")
     group.add_argument("--lenslet-pitch-um", type=positive_finite_float, metavar="P",
@@ -58,9 +55,22 @@ def add_shack_hartmann_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def requested(args: argparse.Namespace) -> bool:
-    """True when the options ask for Shack-Hartmann analysis."""
-    return any(getattr(args, name, None) is not None
-               for name in ("config", "reference", "lenslet_pitch_um", "focal_length_mm", "pixel_um"))
+    """True when the options ask for Shack-Hartmann analysis: a sensor option, or ``--config`` of a Shack-Hartmann station.
+
+    Raises
+    ------
+    InputError
+        ``--config`` is not a valid station file.
+    """
+    if any(getattr(args, name, None) is not None
+           for name in ("reference", "lenslet_pitch_um", "focal_length_mm", "pixel_um")):
+        return True
+    if getattr(args, "config", None) is None:
+        return False
+    try:
+        return load_station_config(Path(args.config)).station.kind == "shack-hartmann"
+    except ConfigError as error:
+        raise InputError(str(error)) from None
 
 
 def _pupil_argument(text: str) -> tuple[float, float, float]:
@@ -133,12 +143,8 @@ def _check_options(args: argparse.Namespace) -> Path:
 def _processor(path: Path, args: argparse.Namespace, reference: np.ndarray | None) -> ShackHartmannProcessor:
     """The station's own processor (``--config``), or one for the lenslets the options describe."""
     if args.config is not None:
-        config = load_station_config(args.config)
-        if config.station.kind != "shack-hartmann":
-            raise InputError(f"{args.config}: [station] kind = '{config.station.kind}'; analyze --config with a "
-                             f"spot image expects a Shack-Hartmann station file (kind = 'shack-hartmann')")
-        processor = build_processor(config)
-        assert isinstance(processor, ShackHartmannProcessor)
+        processor = build_processor(load_station_config(args.config))
+        assert isinstance(processor, ShackHartmannProcessor)  # requested() saw a Shack-Hartmann station
         return processor
     try:
         setup = ShackHartmannSetup(

@@ -48,6 +48,14 @@ def positive_finite_float(text: str) -> float:
     return value
 
 
+def unit_fraction(text: str) -> float:
+    """A fraction from 0 to 1 inclusive, or argparse's usage error naming the bad value."""
+    value = finite_float(text)
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a fraction from 0 to 1, got {text!r}")
+    return value
+
+
 def obscuration_ratio(text: str) -> float:
     """An obscuration ratio (inner over outer radius) strictly between 0 and 1, or argparse's usage error."""
     try:

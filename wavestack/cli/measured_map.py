@@ -10,7 +10,6 @@ without a measurement are reported as drop-outs.
 from __future__ import annotations
 
 import argparse
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
@@ -19,11 +18,30 @@ import numpy as np
 
 from wavestack.cli.arguments import obscuration_ratio
 from wavestack.pipeline import Aperture, DetectionSettings, FitBasis, FitterDiagnostics, IllConditionedBasis, InputError
-from wavestack.pipeline import MeasuredWavefront, detect_aperture, read_measured_map, unsupported_reason
+from wavestack.pipeline import detect_aperture, read_measured_map, unsupported_reason
 
 # How a fitting library's setting is spelled on each command line.
 ANALYZE_FLAGS = {"method": "--fit-method", "modes": "--modes"}
 FIT_FLAGS = {"method": "--method", "modes": "--modes"}
+
+
+@dataclass(frozen=True, eq=False)
+class MapWavefront:
+    """A measured map in waves on its outline.
+
+    Attributes
+    ----------
+    waves : ndarray, shape (rows, cols)
+        Waves, NaN wherever the file has no measurement.
+    aperture : Aperture
+        The outline (module notes).
+    valid : ndarray of bool
+        The pixels holding a measurement.
+    """
+
+    waves: np.ndarray
+    aperture: Aperture
+    valid: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -68,7 +86,7 @@ def reject_unsupported(paths: Sequence[Path]) -> None:
             raise InputError(reason)
 
 
-def read_map_wavefront(path: Path, wavelength_nm: float | None) -> tuple[MeasuredWavefront, float, MapPixels]:
+def read_map_wavefront(path: Path, wavelength_nm: float | None) -> tuple[MapWavefront, float, MapPixels]:
     """A measured map as waves on its outline aperture, NaN wherever the file has no measurement.
 
     Parameters
@@ -80,15 +98,14 @@ def read_map_wavefront(path: Path, wavelength_nm: float | None) -> tuple[Measure
 
     Returns
     -------
-    (MeasuredWavefront, float, MapPixels)
-        The wavefront (method ``"file"``), the wavelength used in nanometres, the pixel counts.
+    (MapWavefront, float, MapPixels)
+        The wavefront, the wavelength used in nanometres, the pixel counts.
 
     Raises
     ------
     InputError
         If the file cannot be read or gives no wavelength and none is given.
     """
-    tick = time.perf_counter()
     data = read_measured_map(path)
     wavelength = wavelength_nm or data.wavelength_nm
     if wavelength is None:
@@ -108,16 +125,7 @@ def read_map_wavefront(path: Path, wavelength_nm: float | None) -> tuple[Measure
     # a hole the join leaves (a drop-out next to the edge, which the opening cut open) is a drop-out too:
     # holes count as obscurations from the detection's own drop-out size on
     aperture = Aperture.from_mask(outline, min_hole_area_px=settings.fill_dropouts_below_px)
-    measured = MeasuredWavefront(waves=waves, aperture=aperture, method="file", aperture_choice="file",
-                                 timings={"read": time.perf_counter() - tick})
-    return measured, wavelength, pixels
-
-
-def fit_mask_of(measured: MeasuredWavefront) -> np.ndarray | None:
-    """The pixels to fit: a measured map's valid pixels; None (the aperture's) otherwise."""
-    if measured.method != "file":
-        return None
-    return np.isfinite(measured.waves) & measured.aperture.mask
+    return MapWavefront(waves, aperture, valid), wavelength, pixels
 
 
 def advised(error: IllConditionedBasis, source: str, flags: dict[str, str]) -> InputError:

@@ -1,4 +1,9 @@
-"""``[processing]``: how an interferometer station turns frames into coefficients, and what its fitters are built with."""
+"""``[processing]``: how an interferometer station turns frames into coefficients, and what its fitters are built with.
+
+The table only declares and checks the settings; :meth:`ProcessingSettings.interferometer` gives
+them to the one processor (:mod:`wavestack.pipeline.instrument`) that the station, ``replay``,
+``batch`` and ``analyze --config`` all run.
+"""
 
 from __future__ import annotations
 
@@ -8,6 +13,7 @@ from typing import Final, Literal
 import numpy as np
 
 from wavestack.config.schema import ConfigError, setting
+from wavestack.pipeline.instrument import FitSettings, InterferometerSettings, QualitySettings
 
 #: Steps each fixed-step algorithm assumes, degrees from the first (the station steps counter-clockwise).
 FIXED_STEPS_DEG: Final = {"four": (0.0, 90.0, 180.0, 270.0), "hariharan": (0.0, 90.0, 180.0, 270.0, 360.0)}
@@ -17,18 +23,6 @@ MAX_STEPS: Final = 32
 #: phase noise grows with it (four 90 degree steps: 1.41; 0/45/90 degrees: 12; 0/30/60 degrees: 29).
 MAX_STEP_CONDITION: Final = 20.0
 _STEP_TOLERANCE_DEG = 1e-6
-
-
-@dataclass(frozen=True)
-class FitSettings:
-    """What a fitter is built with (see :func:`wavestack.pipeline.build_fitter`)."""
-
-    method: str = "csf-qcm"
-    modes: int = 36
-    ordering: str = "noll"
-    remove: str | None = "ptt"
-    mesh_vertices: int = 15000
-    obscuration: float | None = None
 
 
 @dataclass(frozen=True)
@@ -56,6 +50,14 @@ class ProcessingSettings:
                                  doc="CSF-QCM mesh size; 8000 builds in ~0.4 s at 512 x 512 samples")
     max_residual_waves: float = setting(0.1, minimum=0.0, maximum=100.0,
                                         doc="a fit whose residual RMS exceeds this is flagged invalid, waves")
+    fit_dtype: Literal["float32", "float64"] = setting("float32", doc="the fitters' operator and per-frame product")
+    carrier_refresh_sets: int = setting(32, minimum=1, maximum=100000,
+                                        doc="carrier method: search the carrier at least every this many frames")
+    min_modulation: float = setting(0.1, minimum=0.0, maximum=1.0,
+                                    doc="pixels below this fraction of the aperture's mean modulation are not fitted")
+    check_fringe_order: bool = setting(True, doc="leave out pixels whose fringe order is not trusted")
+    spike_clip: bool = setting(True, doc="leave out pixels whose fit residual exceeds clip_sigma residual RMS")
+    clip_sigma: float = setting(6.0, minimum=1.0, maximum=1000.0, doc="the spike clip's limit, in residual RMS")
 
     @property
     def frames_per_set(self) -> int:
@@ -89,7 +91,21 @@ class ProcessingSettings:
 
     def fit_settings(self) -> FitSettings:
         return FitSettings(self.fit_method, self.modes, self.ordering, None if self.remove == "none" else self.remove,
-                           self.mesh_vertices, self.obscuration)
+                           self.mesh_vertices, self.obscuration, self.fit_dtype)
+
+    def interferometer(self, *, saturation_counts: float | None = None) -> InterferometerSettings:
+        """These settings as the interferometer processor takes them.
+
+        ``saturation_counts``: the camera's full scale (None: the frames' integer type's).
+        """
+        quality = QualitySettings(self.min_modulation, saturation_counts, self.check_fringe_order)
+        return InterferometerSettings(
+            method=self.method, psi_algorithm=self.psi_algorithm, steps_rad=tuple(np.radians(self.steps_deg)),
+            carrier_sign=self.carrier_sign, carrier_refresh_sets=self.carrier_refresh_sets,
+            fit=self.fit_settings(), fit_decimation=self.fit_decimation, iou_threshold=self.iou_threshold,
+            watch_block_px=self.watch_block_px, max_residues=self.max_residues,
+            unwrap_prefilter_px=self.unwrap_prefilter_px, max_residual_waves=self.max_residual_waves,
+            quality=quality, clip_sigma=self.clip_sigma if self.spike_clip else None)
 
 
 def _obscuration_problem(fit_method: str, obscuration: float | None) -> str | None:

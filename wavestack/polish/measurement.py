@@ -9,11 +9,13 @@ above its limit.
 Units: a map in waves of wavefront becomes nm of surface as ``waves * wavelength_nm /
 reflection_factor`` (2 for a surface seen in reflection at normal incidence, one pass). Each map
 is cut to the aperture less ``edge_px`` pixels of its rim (the detected aperture's rim pixels carry
-the lowest fringe modulation and the station's worst phase: 0.3-4 waves of PV on a few rim pixels
-of the simulated stations, see docs/station.md; a solver would chase them), then has the
+the lowest fringe modulation and the fit's largest residual, see docs/station.md; a solver would
+chase them), then has the
 configured target figure subtracted (if any) and piston, tip and tilt removed by a
 least-squares plane on the aperture, before the maps are averaged: tilt and piston change from
-result to result with alignment and vibration, and are not polished. The noise estimate is the
+result to result with alignment and vibration, and are not polished. A pixel the station's quality
+mask left out of one map (NaN there) is averaged over the maps that measured it; a map leaving out
+more than :data:`MAX_LEFT_OUT` of the aperture is refused. The noise estimate is the
 standard error of the mean, ``sqrt(mean over the aperture of the per-pixel variance across the N
 maps / N)``, with the unbiased (N - 1) variance: the spread that is left after PTT removal is
 measurement noise plus any residual change during the average (both are what the solver must not
@@ -30,8 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-__all__ = ["ApertureKey", "MapSample", "Measurement", "UntrustedMeasurement", "average_surface", "remove_ptt",
-           "surface_stats"]
+__all__ = ["MAX_LEFT_OUT", "ApertureKey", "MapSample", "Measurement", "UntrustedMeasurement", "average_surface",
+           "remove_ptt", "surface_stats"]
 
 
 class UntrustedMeasurement(ValueError):
@@ -174,11 +176,20 @@ def surface_stats(surface_nm: NDArray[np.floating], mask: NDArray[np.bool_]) -> 
     return float(np.std(values)), float(np.ptp(values))
 
 
+#: Largest share of the aperture one map may leave out (its quality mask's marks) and still be averaged.
+MAX_LEFT_OUT = 0.05
+
+
 def _check_samples(samples: Sequence[MapSample], min_count: int, not_before_ns: int | None) -> NDArray[np.bool_]:
-    """The common aperture mask of ``samples``; raises UntrustedMeasurement naming the first problem."""
+    """The aperture of ``samples`` (the pixels any of them measured); raises UntrustedMeasurement naming the first problem.
+
+    A map may leave out a few pixels the others measured (the station's quality mask: a spike, a
+    saturated speck); more than :data:`MAX_LEFT_OUT` of the aperture, or another grid, is another
+    aperture.
+    """
     if len(samples) < min_count:
         raise UntrustedMeasurement(f"expected at least {min_count} valid results to average, got {len(samples)}")
-    mask = None
+    masks = []
     for index, sample in enumerate(samples):
         if not sample.valid or sample.waves is None:
             raise UntrustedMeasurement(f"result {index} of the average is invalid: {sample.reason or 'no map'}")
@@ -188,14 +199,16 @@ def _check_samples(samples: Sequence[MapSample], min_count: int, not_before_ns: 
         if sample.aperture_id != samples[0].aperture_id:
             raise UntrustedMeasurement(f"aperture changed during the average: result {index} has aperture id "
                                        f"{sample.aperture_id}, expected {samples[0].aperture_id}")
-        finite = np.isfinite(sample.waves)
-        if mask is None:
-            mask = finite
-        elif finite.shape != mask.shape or not np.array_equal(finite, mask):
-            raise UntrustedMeasurement(f"aperture changed during the average: result {index}'s map covers "
-                                       f"{int(finite.sum())} pixels {finite.shape}, expected {int(mask.sum())} "
-                                       f"{mask.shape}")
-    assert mask is not None
+        masks.append(np.isfinite(sample.waves))
+        if masks[-1].shape != masks[0].shape:
+            raise UntrustedMeasurement(f"aperture changed during the average: result {index}'s map is "
+                                       f"{masks[-1].shape}, expected {masks[0].shape}")
+    mask = np.logical_or.reduce(masks)
+    for index, finite in enumerate(masks):
+        left_out = int(np.count_nonzero(mask & ~finite))
+        if left_out > MAX_LEFT_OUT * mask.sum():
+            raise UntrustedMeasurement(f"aperture changed during the average: result {index}'s map leaves out "
+                                       f"{left_out} of the {int(mask.sum())} pixels the others measured")
     if mask.sum() < 3:
         raise UntrustedMeasurement(f"the aperture has {int(mask.sum())} pixels; expected at least 3")
     return mask
@@ -269,10 +282,17 @@ def average_surface(samples: Sequence[MapSample], *, wavelength_nm: float, refle
         surface = np.asarray(sample.waves, dtype=np.float64) * scale
         if target is not None:
             surface = surface - target
-        maps[index] = remove_ptt(surface, mask)[mask]
-    mean = maps.mean(axis=0)
+        maps[index] = remove_ptt(surface, mask & np.isfinite(surface))[mask]  # NaN where this map left a pixel out
+    measured = np.isfinite(maps)
+    per_pixel = measured.sum(axis=0)  # >= 1: the aperture is the pixels some map measured
+    mean = np.where(measured, maps, 0.0).sum(axis=0) / per_pixel
     count = len(samples)
-    noise = float(np.sqrt(maps.var(axis=0, ddof=1).mean() / count)) if count > 1 else float("nan")
+    noise = float("nan")
+    if count > 1:  # the standard error of each pixel's mean, over the pixels measured at least twice
+        spread = np.where(measured, maps - mean, 0.0)
+        twice = per_pixel > 1
+        variance = (spread**2).sum(axis=0)[twice] / (per_pixel[twice] - 1)
+        noise = float(np.sqrt(np.mean(variance / per_pixel[twice])))
     if max_noise_rms_nm is not None and not noise <= max_noise_rms_nm and count > 1:
         raise UntrustedMeasurement(f"noise of the average {noise:.3g} nm RMS exceeds max_noise_rms_nm = "
                                    f"{max_noise_rms_nm:g}")

@@ -3,7 +3,7 @@
 Shared by :mod:`wavestack.recording.writer` and :mod:`wavestack.recording.reader`
 (both re-exported by :mod:`wavestack.recording`).
 
-Layout (``format_version`` 2)::
+Layout (``format_version`` 3)::
 
     /                       attrs: format, format_version, software_version, config_toml, created_utc,
                             header_crc32
@@ -19,11 +19,17 @@ Layout (``format_version`` 2)::
     /results/<key>          (n_results, *shape) bool, int64, float64 or complex128
     /results/<key>/utf8, /results/<key>/end   a string column: UTF-8 bytes and each row's end offset
 
+Version 3 adds the result columns of the data-quality mask and the robust figures: ``pv``,
+``pvr`` and ``quality_inside``, ``quality_used``, ``quality_low_modulation``,
+``quality_saturated``, ``quality_untrusted_order``, ``quality_clipped``, ``quality_rim`` (pixels of
+the fit grid);
+its integrity is version 2's. Versions 1 and 2 still read (without those columns).
+
 Strings are stored as UTF-8 bytes plus end offsets rather than HDF5 variable-length strings,
 because variable-length data lives in the global heap, which SWMR does not cover.
 
-Integrity (version 2)
----------------------
+Integrity (versions 2 and 3)
+----------------------------
 Three layers, because each misses something the others catch:
 
 - HDF5 checks its own metadata (``libver="latest"``: superblock, object headers and chunk
@@ -69,9 +75,9 @@ from numpy.typing import DTypeLike, NDArray
 from wavestack.pipeline.formats import InputError, check_allocation
 
 FORMAT_NAME: Final = "wavestack-recording"
-FORMAT_VERSION: Final = 2
-#: Versions this wavestack reads (1: no checksums).
-READABLE_VERSIONS: Final = (1, 2)
+FORMAT_VERSION: Final = 3
+#: Versions this wavestack reads (1: no checksums; 2: no quality columns).
+READABLE_VERSIONS: Final = (1, 2, 3)
 _FRAME_COLUMNS: Final = ("frame_id", "host_time_ns", "device_timestamp")
 _CHUNK_BYTES: Final = 1 << 16  # target size of a chunk of small per-row columns (a bit flip costs one chunk)
 _KIND_RANK: Final = ("bool", "int", "float", "complex")  # a column accepts its kind and those before it

@@ -20,8 +20,8 @@ import numpy as np
 from wavestack.config import StationConfig, parse_station_config
 from wavestack.pipeline import InputError
 from wavestack.recording.reader import RecordingDamaged, RecordingReader
-from wavestack.pipeline.instrument import SlopeOutcome
-from wavestack.station import InterferometerOutcome, SetBatch, build_processor, json_ready
+from wavestack.pipeline.instrument import InterferometerOutcome, SlopeOutcome
+from wavestack.station import SetBatch, build_processor, json_ready
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,11 +64,14 @@ class ReplayedResult:
     def to_json(self) -> dict[str, object]:
         p = self.processed
         coefficients = [] if p.coefficients_waves is None else [float(c) for c in p.coefficients_waves]
+        statistics = p.statistics
         return json_ready({"type": "result", "index": self.index, "frame_ids": list(self.frame_ids), "valid": p.valid,
                            "reason": p.reason, "coefficients": coefficients,
                            "fitter": p.fitter_kind, "fitter_fallback": p.fitter_fallback,
-                           "unwrap_path": p.unwrap_path, "residual_rms": p.residual_rms,
-                           "residual_pv": p.residual_pv, "difference_rms": self.difference_rms,
+                           "unwrap_path": p.unwrap_path, "residual_rms": statistics.residual_rms,
+                           "residual_pv": statistics.residual_pv, "pv": statistics.pv, "pvr": statistics.pvr,
+                           "quality": {} if p.quality is None else p.quality.to_json(),
+                           "difference_rms": self.difference_rms,
                            "residual_pv_difference": self.residual_pv_difference, "affected_by_damage": self.affected_by_damage})
 
 
@@ -124,30 +127,27 @@ def replay(reader: RecordingReader, config: StationConfig, *,
         raise InputError(f"{reader.path}: malformed station recording: result columns {missing} missing "
                          "(expected beside 'index')")
     rows = {int(i): k for k, i in enumerate(recorded.get("index", []))}
-    processor = build_processor(config, background_builds=False)
+    processor = build_processor(config)  # every fitter built at once, as the live ones were
     batch: SetBatch[_Read] = SetBatch(processor, batched=batched_fits)
     gap = False
     rows_lost = any(d.part == "results" for d in reader.damage)
-    try:
-        for position in range(reader.n_sets):
-            set_index = int(reader.set_indices[position])
-            try:
-                frames = reader.read_set(position)
-            except RecordingDamaged as error:
-                yield from (_compared(read, outcome, recorded) for read, outcome in batch.flush())
-                yield SkippedSet(position, set_index, str(error))
-                gap = True
-                continue
-            row = rows.get(set_index)
-            method = None
-            if same_settings and row is not None and recorded["fitter"][row]:
-                method = str(recorded["fitter"][row])
-            read = _Read(set_index, tuple(f.frame_id for f in frames), row, gap or (rows_lost and row is None))
-            done = batch.add([f.pixels for f in frames], read, fitter_method=method)
-            yield from (_compared(r, outcome, recorded) for r, outcome in done)
-        yield from (_compared(read, outcome, recorded) for read, outcome in batch.flush())
-    finally:
-        processor.close()
+    for position in range(reader.n_sets):
+        set_index = int(reader.set_indices[position])
+        try:
+            frames = reader.read_set(position)
+        except RecordingDamaged as error:
+            yield from (_compared(read, outcome, recorded) for read, outcome in batch.flush())
+            yield SkippedSet(position, set_index, str(error))
+            gap = True
+            continue
+        row = rows.get(set_index)
+        method = None
+        if same_settings and row is not None and recorded["fitter"][row]:
+            method = str(recorded["fitter"][row])
+        read = _Read(set_index, tuple(f.frame_id for f in frames), row, gap or (rows_lost and row is None))
+        done = batch.add([f.pixels for f in frames], read, fitter_method=method)
+        yield from (_compared(r, outcome, recorded) for r, outcome in done)
+    yield from (_compared(read, outcome, recorded) for read, outcome in batch.flush())
 
 
 @dataclass(frozen=True)

@@ -4,9 +4,11 @@ A recording row has the same keys and shapes for every result, valid or not (an 
 has NaN coefficients and ``-1`` frame ids), so the file's columns are declared when it is created
 and the file is crash-safe from its first flush.
 
-Columns added since the first recordings (``residual_pv`` and the frame and set counters
-``frames_acquired`` .. ``sets_pending``) are only new columns: the reader reads whatever columns a
-file has, so recordings made before them still read and replay (without those columns).
+Columns added since the first recordings (``residual_pv``, the frame and set counters
+``frames_acquired`` .. ``sets_pending``, and in format version 3 ``pv``, ``pvr`` and the
+data-quality counts ``quality_inside`` .. ``quality_clipped``) are only new columns: the reader
+reads whatever columns a file has, so recordings made before them still read and replay (without
+those columns).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 
 from wavestack import __version__
 from wavestack.config import StationConfig
+from wavestack.pipeline import PixelQuality
 from wavestack.recording.format import RowValue
 from wavestack.recording.paths import check_recording_path
 from wavestack.recording.writer import RecordingWriter
@@ -43,7 +46,16 @@ def recording_row(result: StationResult, modes: int, frames_per_set: int) -> dic
         "truth_error_rms": np.nan if result.truth_error_rms is None else result.truth_error_rms,
         "sent_to_plc": result.output is not None and result.output.sent,
         **counter_columns(result.counters),
+        "pv": result.pv, "pvr": result.pvr,
+        **quality_columns(result.quality),
     }
+
+
+def quality_columns(quality: PixelQuality | None) -> dict[str, RowValue]:
+    """The data-quality counts as result columns (``quality_inside`` .. ``quality_rim``; -1 without them)."""
+    values = {} if quality is None else quality.to_json()
+    return {f"quality_{key}": int(values.get(key, -1))
+            for key in ("inside", "used", "low_modulation", "saturated", "untrusted_order", "clipped", "rim")}
 
 
 def counter_columns(counters: Counters) -> dict[str, RowValue]:

@@ -1,7 +1,7 @@
 """One cycle of the station as values: a processor's outcome -> the result -> the record every sink gets.
 
 :func:`make_result` is pure: it turns a processor's frozen outcome (an
-:class:`~wavestack.station.interferometer.InterferometerOutcome` or a
+:class:`~wavestack.pipeline.instrument.InterferometerOutcome` or a
 :class:`~wavestack.pipeline.instrument.SlopeOutcome`, both seen through
 :class:`ProcessorOutcome`) and the cycle's facts into a
 :class:`~wavestack.station.results.StationResult`. The output stage then sends the result and
@@ -19,8 +19,8 @@ from numpy.typing import NDArray
 
 from wavestack.drivers.frames import Frame
 from wavestack.station.counters import Counters
+from wavestack.pipeline.instrument import InstrumentOutcome
 from wavestack.station.results import (
-    ApertureRecord,
     FitterDiagnostics,
     OutputRecord,
     StationResult,
@@ -29,37 +29,12 @@ from wavestack.station.results import (
 from wavestack.pipeline.instrument import LensletSlopes
 
 
-class ProcessorOutcome(Protocol):
-    """What both processors' outcomes tell the result (read-only)."""
+class ProcessorOutcome(InstrumentOutcome, Protocol):
+    """What every processor's outcome tells the result (read-only): the pipeline's
+    :class:`~wavestack.pipeline.instrument.InstrumentOutcome` and the fitter's diagnostics."""
 
     @property
-    def valid(self) -> bool: ...
-    @property
-    def reason(self) -> str | None: ...
-    @property
-    def coefficients_waves(self) -> NDArray[np.float64] | None: ...
-    @property
-    def residual_rms(self) -> float: ...
-    @property
-    def residual_pv(self) -> float: ...
-    @property
-    def fitter_kind(self) -> str | None: ...
-    @property
-    def fitter_fallback(self) -> bool: ...
-    @property
-    def normalisation(self) -> str: ...
-    @property
     def diagnostics(self) -> FitterDiagnostics | None: ...
-    @property
-    def aperture_record(self) -> ApertureRecord | None: ...
-    @property
-    def aperture_changed(self) -> bool: ...
-    @property
-    def unwrap_path(self) -> str | None: ...
-    @property
-    def timings_s(self) -> dict[str, float]: ...
-    @property
-    def new_aperture_mask(self) -> NDArray[np.bool_] | None: ...
 
 
 def make_result(index: int, frames: tuple[Frame, ...], outcome: ProcessorOutcome, *, ordering: str,
@@ -88,12 +63,13 @@ def make_result(index: int, frames: tuple[Frame, ...], outcome: ProcessorOutcome
     """
     exposure_ns = frames[0].host_time_ns
     coefficients = outcome.coefficients_waves
+    statistics = outcome.statistics
     return StationResult(
         index=index, frame_ids=tuple(f.frame_id for f in frames), exposure_time_ns=exposure_ns,
         latency_ms=(now_ns - exposure_ns) * 1e-6, valid=outcome.valid, reason=outcome.reason,
         coefficients=tuple(float(c) for c in coefficients) if coefficients is not None else (),
-        ordering=ordering, normalisation=outcome.normalisation, units="waves", residual_rms=outcome.residual_rms,
-        residual_pv=outcome.residual_pv, fitter=outcome.fitter_kind, fitter_fallback=outcome.fitter_fallback,
+        ordering=ordering, normalisation=outcome.normalisation, units="waves", residual_rms=statistics.residual_rms,
+        residual_pv=statistics.residual_pv, pv=statistics.pv, pvr=statistics.pvr, quality=outcome.quality, fitter=outcome.fitter_kind, fitter_fallback=outcome.fitter_fallback,
         fitter_diagnostics=outcome.diagnostics, aperture=outcome.aperture_record, unwrap_path=outcome.unwrap_path,
         counters=counters, timings_ms={k: v * 1e3 for k, v in outcome.timings_s.items()},
         truth_rms=truth.truth_rms if truth is not None else None,
@@ -130,8 +106,12 @@ class CycleRecord:
         Shack-Hartmann: the slopes per lenslet and the lenslets used (a frozen value).
     waves : ndarray (rows, cols) or None
         Interferometer: the unwrapped wavefront on the fit's grid (every ``fit_decimation``-th
-        pixel), waves, NaN outside the aperture, as the processor made it (never mutated after);
-        None when the set gave none. The polishing loop averages these into its surface map.
+        pixel), waves, NaN outside the aperture and wherever the quality mask left a pixel out,
+        as the processor made it (never mutated after); None when the set gave none. The
+        polishing loop averages these into its surface map.
+    flags : ndarray of uint8 (rows, cols) or None
+        Interferometer: the quality marks of each pixel of ``waves``
+        (:mod:`wavestack.pipeline.instrument.quality`), for the live view.
     """
 
     result: StationResult
@@ -139,6 +119,7 @@ class CycleRecord:
     new_aperture_mask: NDArray[np.bool_] | None = None
     lenslets: LensletSlopes | None = None
     waves: NDArray[np.floating] | None = None
+    flags: NDArray[np.uint8] | None = None
 
 
 #: A result sink: the live view, the JSON lines, the recording.

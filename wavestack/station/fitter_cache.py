@@ -1,4 +1,4 @@
-"""Fitters for the apertures a station sees: the configured method built in the background.
+"""The station's fitter source: the configured method built in the background.
 
 Building a CSF-QCM fitter costs about a second at station resolution, a refit a few
 milliseconds. When the aperture changes, the station must not stall: :class:`FitterCache` starts
@@ -6,6 +6,11 @@ the configured build on a worker thread and, until it is ready, hands out a ``qr
 same Zernike modes orthonormalised on the new samples) built at once, flagged as such. A ``qr``
 fit is exact for the modes it fits; it differs from the mapped fit in what the coefficients mean
 on a non-circular aperture, which is why results on it carry the flag.
+
+It is a :class:`~wavestack.pipeline.FitterSource`: the processor (in ``pipeline``) asks it for
+fitters and knows nothing of its thread. Every fitter is built by
+:func:`~wavestack.pipeline.instrument.build_configured`, as ``analyze`` and ``replay``'s synchronous
+source builds it, so a fitter does not depend on who built it.
 """
 
 from __future__ import annotations
@@ -14,35 +19,16 @@ import logging
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
 
-from wavestack.config import FitSettings
-from wavestack.pipeline import Aperture, Fitter, build_fitter
+import numpy as np
+from numpy.typing import NDArray
+
+from wavestack.pipeline import Aperture, Fitter
+from wavestack.pipeline.instrument import FALLBACK_METHOD, FitSettings, FitterChoice, build_configured, choice_of
 
 logger = logging.getLogger(__name__)
 
-FALLBACK_METHOD = "qr"
-
-
-@dataclass(frozen=True, eq=False)
-class FitterChoice:
-    """The fitter to use for one result.
-
-    Attributes
-    ----------
-    fitter : Fitter
-    kind : str
-        The method that built it (``csf-qcm``, ``qr``, ``circle``, ``annulus``, ``conformal``).
-    fallback : bool
-        True when it stands in for the configured method while that one is being built.
-    aperture_id : int
-        Which aperture (counted from 0 per station run) it was built for.
-    """
-
-    fitter: Fitter
-    kind: str
-    fallback: bool
-    aperture_id: int
+__all__ = ["FALLBACK_METHOD", "FitterCache", "FitterChoice"]
 
 
 class FitterCache:
@@ -51,20 +37,16 @@ class FitterCache:
     Parameters
     ----------
     settings : FitSettings
-    background : bool
-        Build the configured method on a worker thread (station) or synchronously (replay,
-        tests that need determinism).
     """
 
-    def __init__(self, settings: FitSettings, *, background: bool = True) -> None:
+    def __init__(self, settings: FitSettings) -> None:
         self._settings = settings
-        self._executor = (
-            ThreadPoolExecutor(max_workers=1, thread_name_prefix="fitter-build") if background else None
-        )
+        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fitter-build")
         self._lock = threading.Lock()
         self._aperture_id = -1
         self._current: FitterChoice | None = None
         self._aperture: Aperture | None = None
+        self._fit_mask: NDArray[np.bool_] | None = None
         self._built: dict[str, FitterChoice] = {}  # fitters of the current aperture, by method
         self._pending: Future[Fitter] | None = None
         self._pending_started = 0.0
@@ -74,18 +56,15 @@ class FitterCache:
     def settings(self) -> FitSettings:
         return self._settings
 
-    def _build(self, aperture: Aperture, method: str) -> Fitter:
-        s = self._settings
-        return build_fitter(aperture, method=method, modes=s.modes, ordering=s.ordering, remove=s.remove,
-                            mesh_vertices=s.mesh_vertices, obscuration=s.obscuration,
-                            fallback="qr" if method in ("csf-qcm", "conformal") else None)
-
-    def new_aperture(self, aperture: Aperture, *, method: str | None = None) -> FitterChoice:
+    def new_aperture(self, aperture: Aperture, *, fit_mask: NDArray[np.bool_] | None = None,
+                     method: str | None = None) -> FitterChoice:
         """Start using a new aperture; returns the fitter to use at once.
 
         Parameters
         ----------
         aperture : Aperture
+        fit_mask : ndarray of bool, optional
+            The pixels to fit, when not the whole aperture.
         method : str, optional
             Force this method synchronously (replay reproducing a result that ran on a fallback).
         """
@@ -96,41 +75,36 @@ class FitterCache:
                 self._pending.cancel()  # a build for an aperture already gone; a running one finishes unused
                 self._pending = None
         configured = self._settings.method
-        if method is not None or self._executor is None or configured == FALLBACK_METHOD:
-            kind = method or configured
+        if method is not None or configured == FALLBACK_METHOD:
             tick = time.perf_counter()
-            fitter = self._build(aperture, kind)
-            built = fitter.diagnostics.method  # a mapped method may have fallen back to qr
-            choice = FitterChoice(fitter, built, built != configured, aperture_id)
+            choice = choice_of(build_configured(aperture, self._settings, method or configured, fit_mask),
+                               configured, aperture_id)
             self.last_build_s = time.perf_counter() - tick
         else:
             # The configured build starts first, so that it runs on the other core while this
             # thread builds the stand-in (measured: about 0.2 s sooner to the new map).
             with self._lock:
                 self._pending_started = time.perf_counter()
-                self._pending = self._executor.submit(self._build, aperture, configured)
-            choice = FitterChoice(self._build(aperture, FALLBACK_METHOD), FALLBACK_METHOD, True, aperture_id)
+                self._pending = self._executor.submit(build_configured, aperture, self._settings, configured,
+                                                      fit_mask)
+            stand_in = build_configured(aperture, self._settings, FALLBACK_METHOD, fit_mask)
+            choice = FitterChoice(stand_in, FALLBACK_METHOD, True, aperture_id)
         with self._lock:
             self._current = choice
-            self._aperture = aperture
+            self._aperture, self._fit_mask = aperture, fit_mask
             self._built = {choice.kind: choice}
         return choice
 
     def use_method(self, method: str) -> FitterChoice:
-        """Switch the current aperture to a fitter of ``method``, built synchronously once.
-
-        Replay uses it to run each result on the fitter that ran it live (a ``qr`` stand-in, then
-        the configured method once its build had finished).
-        """
+        """Switch the current aperture to a fitter of ``method``, built synchronously once."""
         with self._lock:
-            current, aperture = self._current, self._aperture
+            current, aperture, fit_mask = self._current, self._aperture, self._fit_mask
             cached = self._built.get(method)
         if current is None or aperture is None:
             raise RuntimeError("use_method before any aperture")
         if cached is None:
-            fitter = self._build(aperture, method)
-            cached = FitterChoice(fitter, fitter.diagnostics.method, fitter.diagnostics.method != self._settings.method,
-                                  current.aperture_id)
+            cached = choice_of(build_configured(aperture, self._settings, method, fit_mask), self._settings.method,
+                               current.aperture_id)
         with self._lock:
             self._built[method] = cached
             self._current = cached
@@ -151,16 +125,15 @@ class FitterCache:
                                    self._settings.method, error, current.kind)
                     return current
                 self.last_build_s = time.perf_counter() - self._pending_started
-                fitter = pending.result()
-                built = fitter.diagnostics.method
-                self._current = FitterChoice(fitter, built, built != self._settings.method, current.aperture_id)
+                self._current = choice_of(pending.result(), self._settings.method, current.aperture_id)
+                self._built[self._current.kind] = self._current
                 logger.info("%s fitter ready for aperture %d after %.2f s",
                             self._settings.method, current.aperture_id, self.last_build_s)
                 return self._current
         return current
 
     def wait_for_build(self, timeout_s: float) -> bool:
-        """Block until a pending build finishes (tests, replay); True if none is pending after."""
+        """Block until a pending build finishes (tests); True if none is pending after."""
         with self._lock:
             pending = self._pending
         if pending is None:
@@ -173,5 +146,4 @@ class FitterCache:
 
     def close(self) -> None:
         """Stop the worker (a running build is waited for, queued ones dropped); idempotent."""
-        if self._executor is not None:
-            self._executor.shutdown(wait=True, cancel_futures=True)
+        self._executor.shutdown(wait=True, cancel_futures=True)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wavestack.pipeline.instrument import PixelQuality
 from wavestack.station.counters import Counters
 from wavestack.station.results import StationResult
 from wavestack.station.surface_stage import SurfaceRecord
@@ -34,7 +35,9 @@ class LiveSnapshot:
     leading: tuple[tuple[int, float, float], ...]  # (index, value, change over the window), waves
     truth_error_rms: float | None
     last_reason: str | None
-    residual: tuple[float, float] | None = None  # (rms, pv) of the last valid result, waves
+    residual: tuple[float, float] | None = None  # (rms, pv) of the last valid result's fit residual, waves
+    figures: tuple[float, float] | None = None  # (pv, pvr) of the last valid result's wavefront, waves
+    quality: PixelQuality | None = None  # what the last valid result's data-quality mask left out
     surface: str | None = None  # the last surface figures and verdict, one line
 
 
@@ -59,6 +62,8 @@ class LiveStats:
         self._last: StationResult | None = None
         self._last_reason: str | None = None
         self._residual: tuple[float, float] | None = None
+        self._figures: tuple[float, float] | None = None
+        self._quality: PixelQuality | None = None
         self._surface: str | None = None
 
     def add(self, result: StationResult, now_ns: int) -> None:
@@ -70,6 +75,8 @@ class LiveStats:
             self._valid += 1
             self._coefficients.append(result.coefficients)
             self._residual = (result.residual_rms, result.residual_pv)
+            self._figures = (result.pv, result.pvr)
+            self._quality = result.quality
             if result.surface is not None:
                 self._surface = surface_line(result.surface)
         else:
@@ -101,7 +108,7 @@ class LiveStats:
             latency_p99_ms=float(np.nanpercentile(latencies, 99)) if np.isfinite(latencies).any() else math.nan,
             counters=last.counters if last else None, aperture=aperture, fitter=fitter, leading=leading,
             truth_error_rms=last.truth_error_rms if last else None, last_reason=self._last_reason,
-            residual=self._residual, surface=self._surface,
+            residual=self._residual, figures=self._figures, quality=self._quality, surface=self._surface,
         )
 
 
@@ -123,8 +130,12 @@ def render_live_view(snapshot: LiveSnapshot, ordering: str) -> list[str]:
     if s.leading:
         terms = "  ".join(f"Z{j}={value:+.4f}{_trend(change)}" for j, value, change in s.leading)
         lines.append(f"waves ({ordering}): {terms}")
+    if s.figures is not None and any(math.isfinite(v) for v in s.figures):
+        lines.append(f"wavefront: pv {s.figures[0]:.4f}  pvr {s.figures[1]:.4f} waves")
     if s.residual is not None:
         lines.append(f"fit residual: rms {s.residual[0]:.4f}  pv {s.residual[1]:.4f} waves")
+    if s.quality is not None:
+        lines.append(quality_line(s.quality))
     if s.surface is not None:
         lines.append(s.surface)
     if s.truth_error_rms is not None:
@@ -132,6 +143,13 @@ def render_live_view(snapshot: LiveSnapshot, ordering: str) -> list[str]:
     if s.last_reason:
         lines.append(f"last invalid: {s.last_reason}")
     return lines
+
+
+def quality_line(quality: PixelQuality) -> str:
+    """The pixels the last result used, and why the others inside the aperture were left out."""
+    q = quality
+    return (f"pixels used {q.used} of {q.inside}: left out {q.excluded} (low modulation {q.low_modulation}, "
+            f"saturated {q.saturated}, fringe order {q.untrusted_order}, clipped {q.clipped}, rim {q.rim})")
 
 
 def surface_line(record: SurfaceRecord) -> str:

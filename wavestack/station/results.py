@@ -1,8 +1,10 @@
 """The station's result record: everything one refit produced, as a plain value and as JSON.
 
-The small records on a result (:class:`ApertureRecord`, the fitter's diagnostics, the
-:class:`OutputRecord` of what went to the PLC) are frozen dataclasses; each has a ``to_json``
-that gives the keys the JSON lines and the recording have always carried.
+The small records on a result (:class:`ApertureRecord`, the fitter's diagnostics, the data
+quality's counts, the :class:`OutputRecord` of what went to the PLC) are frozen dataclasses; each
+has a ``to_json`` that gives the keys the JSON lines and the recording carry. The records every
+instrument's outcome fills (:class:`ApertureRecord`, :class:`FitDiagnostics`,
+:class:`~wavestack.pipeline.PixelQuality`) come from :mod:`wavestack.pipeline.instrument`.
 """
 
 from __future__ import annotations
@@ -11,21 +13,12 @@ import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Union
 
-from wavestack.pipeline.instrument import ApertureRecord, ReconstructorDiagnostics
+from wavestack.pipeline.instrument import ApertureRecord, FitDiagnostics, PixelQuality, ReconstructorDiagnostics
 from wavestack.station.counters import Counters
 from wavestack.station.surface_stage import SurfaceRecord
 
-
-@dataclass(frozen=True)
-class FitDiagnostics:
-    """A mapped or QR fitter's figures: Gram condition number, map fold-overs, largest Beltrami coefficient."""
-
-    gram_condition: float | None
-    flips: int | None
-    max_beltrami: float | None
-
-    def to_json(self) -> dict[str, object]:
-        return asdict(self)
+__all__ = ["ApertureRecord", "FitDiagnostics", "FitterDiagnostics", "Heartbeat", "OutputRecord",
+           "ReconstructorDiagnostics", "SentCommand", "StationResult", "TruthErrors", "json_ready"]
 
 
 FitterDiagnostics = Union[FitDiagnostics, ReconstructorDiagnostics]
@@ -148,8 +141,17 @@ class StationResult:
         RMS of the fit residual, waves (NaN when invalid).
     residual_pv : float
         Peak-to-valley of the fit residual, waves, over the same samples as ``residual_rms``
-        (the fit's grid; Shack-Hartmann: the slope misfit times the pitch, as for the RMS); NaN
-        when invalid.
+        (the fit grid's pixels used; Shack-Hartmann: the slope misfit times the pitch, as for the
+        RMS); NaN when invalid.
+    pv : float
+        Peak-to-valley of the measured wavefront less the removed physical terms (piston, tilt),
+        waves, over the pixels used; NaN when invalid or not computed.
+    pvr : float
+        Evans' robust PV: the PV of the 36-term Fringe Zernike fit of the same map plus three
+        times that fit's residual RMS, waves; NaN when invalid or not computed.
+    quality : PixelQuality or None
+        What the data-quality mask left out inside the aperture (``inside``, ``used``,
+        ``excluded``, ``low_modulation``, ``saturated``, ``untrusted_order``, ``clipped``).
     fitter : str
         Method of the fitter that ran (``csf-qcm``, ``qr``, ...).
     fitter_fallback : bool
@@ -169,7 +171,10 @@ class StationResult:
     truth_rms, truth_error_rms : float or None
         Simulated devices only: RMS of the simulator's true wavefront (piston, tilt removed as the
         fit removes them) and RMS of the measured minus the true wavefront, both over the fitted
-        aperture in the fitted subspace, waves.
+        aperture (the pixels the fitter was built on) in the fitted subspace, waves. The measured
+        coefficients come from the pixels the quality mask left in: where it leaves out many (a
+        saturated band), the physical tilt removal and a mapped basis see another pixel set, and
+        this figure grows with that, not with an error of the pixels used.
     output : OutputRecord or None
         What went to the PLC: ``sent`` (bool), ``status`` flags, ``command_id``.
     surface : SurfaceRecord or None
@@ -199,6 +204,9 @@ class StationResult:
     truth_rms: float | None = None
     truth_error_rms: float | None = None
     output: OutputRecord | None = None
+    pv: float = float("nan")
+    pvr: float = float("nan")
+    quality: PixelQuality | None = None
     surface: SurfaceRecord | None = None
 
     @classmethod
@@ -225,6 +233,7 @@ class StationResult:
         values["fitter_diagnostics"] = {} if self.fitter_diagnostics is None else self.fitter_diagnostics.to_json()
         values["aperture"] = {} if self.aperture is None else self.aperture.to_json()
         values["output"] = None if self.output is None else self.output.to_json()
+        values["quality"] = {} if self.quality is None else self.quality.to_json()
         values["surface"] = None if self.surface is None else self.surface.to_json()
         return {"type": "result", **json_ready(values)}
 

@@ -1,8 +1,8 @@
 """Sets of a recording processed with one batched refit per run of sets that share a fitter.
 
-:meth:`SetProcessor.prepare` runs the stages before the fit set after set (they carry state);
+:meth:`~wavestack.pipeline.instrument.InterferometerProcessor.prepare` runs the stages before the fit set after set (they carry state);
 the prepared maps that share a fitter are then fitted together by ``Fitter.fit_many`` and each
-finished by :meth:`SetProcessor.finish`. A run (a *group*) ends where the fitter changes, where a
+finished by :meth:`~wavestack.pipeline.instrument.InterferometerProcessor.finish`. A run (a *group*) ends where the fitter changes, where a
 set adopts a new aperture, at a set that could not be read, at :data:`GROUP_SETS` maps, and at
 the end: so the groups, and therefore the numbers, depend only on the sets since the last
 adoption, and a block of a recording that starts at an adoption is fitted exactly as the same
@@ -14,7 +14,8 @@ small station: coefficients within 7.4e-7 waves, residual RMS within 5e-5 waves,
 ``|w|^2 - c.Gc`` identity in float32), so the batched path is an option
 (``replay(..., batched_fits=True)``), not what the live station or ``wavestack replay`` runs.
 The carrier method, whose next frame depends on this frame's fit (an invalid fit makes it look for
-its carrier afresh), and the Shack-Hartmann processor are processed set by set.
+its carrier afresh), and the Shack-Hartmann processor are processed set by set; so is a map with
+pixels the quality mask left out (``fit_many`` fits such a map on its own).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.pipeline import FitResult, InvalidFrame
-from wavestack.station.interferometer import InterferometerOutcome, PreparedSet, SetProcessor
+from wavestack.pipeline.instrument import InterferometerOutcome, InterferometerProcessor, PreparedSet
 from wavestack.pipeline.instrument import ShackHartmannProcessor, SlopeOutcome
 
 #: Most maps fitted in one batch (~256 kB each on the small station's fit grid).
@@ -48,11 +49,11 @@ class SetBatch(Generic[Tag]):
 
     Parameters
     ----------
-    processor : SetProcessor or ShackHartmannProcessor
+    processor : InterferometerProcessor or ShackHartmannProcessor
     group_sets : int
         Most maps per batched fit.
     batched : bool
-        False: every set through :meth:`SetProcessor.process` as it comes (the live station's path).
+        False: every set through the processor's ``process`` as it comes (the live station's path).
 
     Example
     -------
@@ -66,13 +67,13 @@ class SetBatch(Generic[Tag]):
             ...
     """
 
-    def __init__(self, processor: SetProcessor | ShackHartmannProcessor, *, group_sets: int = GROUP_SETS,
+    def __init__(self, processor: InterferometerProcessor | ShackHartmannProcessor, *, group_sets: int = GROUP_SETS,
                  batched: bool = True) -> None:
         if group_sets < 1:
             raise ValueError(f"group_sets: expected at least 1, got {group_sets}")
         self._processor = processor
         self._group_sets = group_sets
-        self._batched = batched and isinstance(processor, SetProcessor) and processor.settings.method == "psi"
+        self._batched = batched and isinstance(processor, InterferometerProcessor) and processor.settings.method == "psi"
         self._waiting: list[_Waiting[Tag]] = []
 
     def add(self, frames: Sequence[NDArray[np.generic]], tag: Tag, *, fitter_method: str | None = None
@@ -80,7 +81,7 @@ class SetBatch(Generic[Tag]):
         """Process one set up to its fit; returns the (tag, outcome) pairs finished meanwhile, in order."""
         if not self._batched:
             return [(tag, self._processor.process(frames, fitter_method=fitter_method))]
-        assert isinstance(self._processor, SetProcessor)
+        assert isinstance(self._processor, InterferometerProcessor)
         prepared = self._processor.prepare(frames, fitter_method=fitter_method)
         done = []
         if prepared.outcome is None and self._ends_group(prepared):
@@ -93,7 +94,7 @@ class SetBatch(Generic[Tag]):
         waiting, self._waiting = self._waiting, []
         to_fit = [w.prepared for w in waiting if w.prepared.outcome is None]
         fits, fit_s = _fit_group(to_fit)
-        assert isinstance(self._processor, SetProcessor) or not waiting
+        assert isinstance(self._processor, InterferometerProcessor) or not waiting
         done = []
         for item in waiting:
             fit = fits.get(id(item.prepared))
@@ -122,7 +123,7 @@ def _fit_group(group: Sequence[PreparedSet]) -> tuple[dict[int, FitResult | Inva
     if not group:
         return {}, 0.0
     fitter = group[0].choice.fitter  # type: ignore[union-attr]
-    maps = [p.waves for p in group]
+    maps = [p.to_fit for p in group]
     tick = time.perf_counter()
     fits: list[FitResult | InvalidFrame] | None = None
     if len(maps) > 1:

@@ -18,8 +18,7 @@ from wavestack.pipeline import InvalidFrame
 from wavestack.pipeline.instrument import SlopeOutcome
 from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
 from wavestack.simulators.spots import SpotTruth
-from wavestack.station.fitter_cache import FitterChoice
-from wavestack.station.interferometer import InterferometerOutcome
+from wavestack.pipeline.instrument import FitterChoice, InterferometerOutcome
 from wavestack.station.results import TruthErrors
 from wavestack.station.truth import coefficient_errors
 

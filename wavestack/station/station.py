@@ -1,8 +1,10 @@
 """The station's result loop: newest set -> processing -> result -> PLC, recording, display.
 
 One pipeline thread (the caller's) takes the newest set from the source and runs one cycle, one
-way, one value per arrow: the processor (a
-:class:`~wavestack.station.interferometer.SetProcessor` for an interferometer, a
+way, one value per arrow: the processor (the pipeline's
+:class:`~wavestack.pipeline.instrument.PhaseShiftingProcessor` or
+:class:`~wavestack.pipeline.instrument.CarrierProcessor` for an interferometer, given the station's
+:class:`~wavestack.station.fitter_cache.FitterCache` as its fitter source; a
 :class:`~wavestack.pipeline.instrument.ShackHartmannProcessor` for a Shack-Hartmann sensor) returns a
 frozen outcome; :func:`~wavestack.station.cycle.make_result` makes the
 :class:`~wavestack.station.results.StationResult`; the output stage sends it through the safety
@@ -42,9 +44,9 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, TypeVar
+from typing import Any, TypeVar, Union
 
-from wavestack.config import StationConfig
+from wavestack.config import BIT_DEPTH, StationConfig
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, renewed
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.ring import WaitTimeout
@@ -53,7 +55,15 @@ from wavestack.station.counters import Counters
 from wavestack.station.cycle import CycleRecord, ResultSink, make_result, with_output
 from wavestack.station.surface_stage import surface_stage
 from wavestack.station.devices import StationDevices, phase_steps_rad, reconnect_devices
-from wavestack.station.interferometer import InterferometerOutcome, SetProcessor
+from wavestack.pipeline.instrument import (
+    CarrierProcessor,
+    FitterSource,
+    InterferometerSettings,
+    PhaseShiftingProcessor,
+    SyncFitterSource,
+    processor_for,
+)
+from wavestack.station.fitter_cache import FitterCache
 from wavestack.station.heap import HeapRelease
 from wavestack.station.latency import LatencyHistogram
 from wavestack.station.outputs import PlcOutput
@@ -64,7 +74,9 @@ from wavestack.station.sources import CarrierSource, PhaseStepSource
 logger = logging.getLogger(__name__)
 _T = TypeVar("_T")
 
-__all__ = ["ResultSink", "Station", "StationSummary", "build_processor"]
+__all__ = ["ResultSink", "Station", "StationSummary", "build_processor", "interferometer_settings"]
+
+Processor = Union[PhaseShiftingProcessor, CarrierProcessor, ShackHartmannProcessor]
 
 _MAX_WAIT_SLICE_S = 0.25  # longest wait between looks at the stop event (and heartbeats, when shorter)
 _FIRST_BACKOFF_S = 0.05
@@ -132,7 +144,8 @@ class Station:
     def __init__(self, config: StationConfig, devices: StationDevices) -> None:
         self._config = config
         self._devices = devices
-        self.processor = build_processor(config)
+        self._fitters = FitterCache(config.processing.fit_settings()) if config.station.kind != "shack-hartmann" else None
+        self.processor = build_processor(config, self._fitters)
         # one stepping thread for every source: a new one per reconnect would get a new malloc arena
         self._stepping = RoleThread("phase-step-acquisition") if config.phase_stepping else None
         self._processing = RoleThread("station-processing")
@@ -171,7 +184,8 @@ class Station:
         if self._stepping is not None:  # the source's stop waited for the stepping already
             self._stepping.close(timeout_s=self._config.camera.timeout_s * 2 + 5.0)
         self._processing.close(timeout_s=self._config.station.max_processing_s + 5.0)
-        self.processor.close()
+        if self._fitters is not None:
+            self._fitters.close()
 
     # ------------------------------------------------------------------ the loop
 
@@ -274,8 +288,9 @@ class Station:
             stage = self._surface
             result = replace(result, surface=self._off_loop(lambda: stage.record(index, waves)))
         sent = self._output.send(result) if self._output is not None else None
+        slopes = isinstance(outcome, SlopeOutcome)
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
-                           outcome.lenslets if isinstance(outcome, SlopeOutcome) else None, waves)
+                           outcome.lenslets if slopes else None, waves, None if slopes else outcome.flags)
 
     def _off_loop(self, compute: Callable[[], _T]) -> _T:
         """``compute()`` (a set's processing, its surface figures) on the processing thread while the
@@ -376,12 +391,20 @@ class Station:
                            if self._output is not None else None)
 
 
-def build_processor(config: StationConfig, *, background_builds: bool = True) -> SetProcessor | ShackHartmannProcessor:
+def interferometer_settings(config: StationConfig) -> InterferometerSettings:
+    """The interferometer processor's settings of a station: ``[processing]``, saturating at the camera's full scale."""
+    return config.processing.interferometer(saturation_counts=float(2 ** BIT_DEPTH[config.camera.pixel_format] - 1))
+
+
+def build_processor(config: StationConfig, fitters: FitterSource | None = None) -> Processor:
     """The processor of a station's kind: phase maps and fits, or Shack-Hartmann slopes.
 
-    ``background_builds=False`` builds fitters synchronously (replay, benchmarks of the stages).
+    ``fitters``: the interferometer's fitter source (the live station's :class:`FitterCache`);
+    None builds every fitter at once (:class:`~wavestack.pipeline.SyncFitterSource`: replay, batch,
+    the stage benchmarks), with the same numbers.
     """
     if config.station.kind == "shack-hartmann":
         assert config.shack_hartmann is not None  # parse_station_config requires [shack_hartmann]
         return ShackHartmannProcessor(config.shack_hartmann.setup(config.station.wavelength_nm))
-    return SetProcessor(config.processing, background_builds=background_builds)
+    settings = interferometer_settings(config)
+    return processor_for(settings, fitters if fitters is not None else SyncFitterSource(settings.fit))

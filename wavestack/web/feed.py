@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.align.loop import IterationRecord
+from wavestack.pipeline.instrument import PixelQuality
 from wavestack.pipeline.zernike import first_index, index_to_nm, mode_name
 from wavestack.polish.run_record import RunRecord
 from wavestack.station.cycle import CycleRecord
@@ -50,6 +51,7 @@ class _PendingMap:
     units: str
     title: str
     number: int
+    flags: NDArray[np.uint8] | None = None
 
 
 def _counts(counts: object, total: str) -> tuple[int, int, int, int]:
@@ -99,7 +101,16 @@ def station_panel(snapshot: LiveSnapshot, newest: StationResult | None, shown: S
         safety=output.command.status if output is not None else None,
         sent=output.sent if output is not None else None,
         plc_state=heartbeat.state if heartbeat is not None else None,
-        heartbeat_ok=heartbeat.ok if heartbeat is not None else None, last_reason=snapshot.last_reason)
+        heartbeat_ok=heartbeat.ok if heartbeat is not None else None, last_reason=snapshot.last_reason,
+        pv=shown.pv if shown is not None else None, pvr=shown.pvr if shown is not None else None,
+        quality=_quality(shown.quality) if shown is not None else None)
+
+
+def _quality(quality: PixelQuality | None) -> tuple[int, int, int, int, int, int, int] | None:
+    if quality is None:
+        return None
+    q = quality
+    return (q.inside, q.used, q.low_modulation, q.saturated, q.untrusted_order, q.clipped, q.rim)
 
 
 class LiveFeed:
@@ -165,7 +176,7 @@ class LiveFeed:
                 self._shown = result
             if record.waves is not None:
                 self._map = _PendingMap(record.waves, "waves", f"wavefront, result {result.index}",
-                                        (self._map.number + 1) if self._map else 1)
+                                        (self._map.number + 1) if self._map else 1, record.flags)
             self._version += 1
 
     def show_map(self, values: NDArray[np.floating], *, units: str, title: str) -> None:
@@ -220,7 +231,7 @@ class LiveFeed:
             history = self._history()
         if render_due and pending is not None:
             self._image = render_map(pending.values, units=pending.units, title=pending.title, seq=pending.number,
-                                     max_side=self._max_side)
+                                     max_side=self._max_side, flags=pending.flags)
             self._rendered, self._last_render_s = pending.number, now
             self._render_ms_total += self._image.render_ms
             self._renders += 1

@@ -7,6 +7,11 @@ colour scale runs from the smallest to the largest block mean: every colour on t
 the map has. Colours are the Turbo map (Mikhailov 2019, an improved rainbow like the ones
 interferometer programs show), taken from OpenCV; NaN is transparent. The outline is traced on the
 downsampled mask with OpenCV's border following (Suzuki & Abe 1985), outer edges and holes.
+
+Pixels the data-quality mask left out (their value NaN, their flag set: low modulation,
+saturated, untrusted fringe order, clipped, rim) are not hidden: every block holding one is painted in
+:data:`LEFT_OUT_COLOUR`, a magenta the Turbo scale never shows, so a dropout is seen as a dropout and
+never as a value.
 """
 
 from __future__ import annotations
@@ -20,11 +25,15 @@ from numpy.typing import NDArray
 
 from wavestack.web.view import MapImage, Polygon
 
-__all__ = ["COLOURS", "downsample", "render_map"]
+__all__ = ["COLOURS", "LEFT_OUT_COLOUR", "downsample", "render_map"]
 
 _LUT_BGR = cv2.applyColorMap(np.arange(256, dtype=np.uint8).reshape(1, 256), cv2.COLORMAP_TURBO)[0]
 #: The colour scale from ``vmin`` to ``vmax``, 256 ``#rrggbb`` strings (the page draws its colour bar with them).
 COLOURS: tuple[str, ...] = tuple(f"#{r:02x}{g:02x}{b:02x}" for b, g, r in _LUT_BGR.tolist())
+#: The colour of a block holding a pixel the quality mask left out (``#rrggbb``).
+LEFT_OUT_COLOUR = "#ff00ff"
+_LEFT_OUT_BGR = (255, 0, 255)
+_OUTSIDE_FLAG = 128  # the quality flags' value outside the aperture (pipeline.instrument.quality.OUTSIDE)
 
 
 def downsample(values: NDArray[np.floating], factor: int) -> NDArray[np.float64]:
@@ -77,7 +86,8 @@ def _outline(inside: NDArray[np.bool_]) -> tuple[Polygon, ...]:
     return tuple(polygons)
 
 
-def render_map(values: NDArray[np.floating], *, units: str, title: str, seq: int, max_side: int = 200) -> MapImage:
+def render_map(values: NDArray[np.floating], *, units: str, title: str, seq: int, max_side: int = 200,
+               flags: NDArray[np.uint8] | None = None) -> MapImage:
     """The false-colour PNG of a map, its colour scale, RMS, PV and outline (module notes).
 
     Parameters
@@ -90,6 +100,9 @@ def render_map(values: NDArray[np.floating], *, units: str, title: str, seq: int
         The render's number.
     max_side : int
         Longest side of the PNG, pixels.
+    flags : ndarray of uint8 (H, W), optional
+        The quality marks of the map's pixels: blocks holding a left-out pixel are painted
+        :data:`LEFT_OUT_COLOUR` (module notes).
 
     Returns
     -------
@@ -120,10 +133,18 @@ def render_map(values: NDArray[np.floating], *, units: str, title: str, seq: int
     bgra = np.zeros(small.shape + (4,), dtype=np.uint8)
     bgra[..., :3] = _LUT_BGR[levels]
     bgra[..., 3] = np.where(inside, 255, 0)
+    left_out = 0
+    if flags is not None:
+        marked = (flags != 0) & (flags != _OUTSIDE_FLAG)
+        left_out = int(np.count_nonzero(marked))
+        if left_out:
+            blocks = downsample(marked.astype(np.float64), factor) > 0  # NaN nowhere: any marked pixel counts
+            bgra[blocks, :3] = _LEFT_OUT_BGR
+            bgra[blocks, 3] = 255
     ok, encoded = cv2.imencode(".png", bgra)
     if not ok:  # OpenCV reports failure by a flag; a map this size never fails to encode
         raise RuntimeError(f"PNG encoding of a {small.shape} map failed")
     return MapImage(seq=seq, png=encoded.tobytes(), width=small.shape[1], height=small.shape[0], factor=factor,
                     vmin=vmin, vmax=vmax, colours=COLOURS[::17],
                     units=units, rms=rms, pv=pv, outline=_outline(inside), title=title,
-                    render_ms=(time.perf_counter() - started) * 1e3)
+                    render_ms=(time.perf_counter() - started) * 1e3, left_out=left_out)

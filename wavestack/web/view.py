@@ -46,6 +46,9 @@ class MapImage:
     outline : tuple of polygons
         The aperture's outline (outer edges and holes) in PNG pixel coordinates (x right, y down,
         pixel centres at half-integers), for an SVG drawn over the image.
+    left_out : int
+        Pixels inside the aperture the data-quality mask left out of the map; the PNG paints every
+        block holding one in :data:`~wavestack.web.render.LEFT_OUT_COLOUR`.
     title : str
         What the map is ("wavefront of result 12", "field point 2").
     render_ms : float
@@ -66,6 +69,7 @@ class MapImage:
     outline: tuple[Polygon, ...]
     title: str
     render_ms: float
+    left_out: int = 0
 
 
 @dataclass(frozen=True)
@@ -105,7 +109,11 @@ class StationPanel:
     coefficients : tuple of Coefficient
         Waves of wavefront.
     residual_rms, residual_pv : float or None
-        Of the shown result, waves.
+        Of the shown result's fit residual, waves.
+    pv, pvr : float or None
+        The shown result's wavefront PV and Evans' robust PV, waves.
+    quality : tuple of int or None
+        The shown result's pixels ``(inside, used, low modulation, saturated, fringe order, clipped, rim)``.
     truth_error_rms : float or None
         Simulated devices: measured minus true, waves RMS.
     safety : str or None
@@ -144,6 +152,9 @@ class StationPanel:
     plc_state: str | None
     heartbeat_ok: bool | None
     last_reason: str | None
+    pv: float | None = None
+    pvr: float | None = None
+    quality: tuple[int, int, int, int, int, int, int] | None = None
 
 
 @dataclass(frozen=True)

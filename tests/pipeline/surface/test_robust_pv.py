@@ -90,3 +90,24 @@ def test_refuses_a_map_with_a_missing_measured_pixel() -> None:
     surface[20, 20] = np.nan
     with pytest.raises(ValueError, match="NaN or infinite"):
         RobustPVAnalyzer(measured_area(disk)).measure(surface)
+
+
+def test_pixels_left_out_of_a_map_are_measured_around_as_on_an_area_without_them() -> None:
+    """``nan_policy="omit"``: the analyzer of the whole area on a map with interior pixels left out
+    (a quality mask's, a clip's) gives the PVr an analyzer built on the remaining pixels gives (their
+    enclosing circle is the same), and Evans' PVr written out independently on them."""
+    rows, cols = np.mgrid[:97, :97]
+    x, y = (cols - 48) / 48, (48 - rows) / 48
+    disk = x**2 + y**2 <= 1
+    u = x**2 + y**2
+    surface = 25.0 * (6 * u**2 - 6 * u + 1) + 9.0 * (3 * u - 2) * y + 4.0 * np.cos(7 * x) * np.sin(5 * y)
+    left_out = disk & (np.hypot(x - 0.2, y + 0.1) < 0.15)  # a dropout in the interior
+    kept = disk & ~left_out
+    holed = np.where(kept, surface, np.nan)
+    omitted = RobustPVAnalyzer(measured_area(disk)).measure(holed, nan_policy="omit")
+    fresh = RobustPVAnalyzer(measured_area(kept)).measure(holed)
+    assert omitted.pvr == pytest.approx(fresh.pvr, rel=1e-9)
+    assert omitted.fit_pv == pytest.approx(fresh.fit_pv, rel=1e-9)
+    assert omitted.pvr == pytest.approx(_independent_pvr(surface, kept), rel=0.01)
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        RobustPVAnalyzer(measured_area(disk)).measure(holed)

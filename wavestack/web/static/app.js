@@ -56,6 +56,10 @@ function drawStation(s) {
   text("sent", s.sent === null ? "-" : (s.sent ? "sent" : "not sent") +
        (s.heartbeat_ok === false ? ", heartbeat failed" : ""));
   text("residual-rms", fixed(s.residual_rms, 4)); text("residual-pv", fixed(s.residual_pv, 4));
+  text("pv", fixed(s.pv, 4)); text("pvr", fixed(s.pvr, 4));
+  text("quality", s.quality === null ? "-" :
+       `${s.quality[1]} used of ${s.quality[0]}; left out: low modulation ${s.quality[2]}, saturated ${s.quality[3]}, ` +
+       `fringe order ${s.quality[4]}, clipped ${s.quality[5]}, rim ${s.quality[6]}`);
   text("truth-error", fixed(s.truth_error_rms, 4));
   text("last-reason", s.last_reason || "-");
   text("shown-index", s.shown_index >= 0 ? s.shown_index : "-");
@@ -105,6 +109,7 @@ function drawMap(m) {
     text("scale-max", general(m.vmax)); text("scale-min", general(m.vmin)); text("scale-units", m.units);
     text("map-rms", general(m.rms)); text("map-pv", general(m.pv)); text("map-units", m.units);
     text("map-render-ms", fixed(m.render_ms, 1));
+    text("map-left-out", m.left_out);
   }
 }
 

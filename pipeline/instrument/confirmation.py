@@ -6,6 +6,11 @@ a fitter build; the straddling set itself is reported invalid. The rule is an ex
 (:class:`ApertureState`) and a pure transition function (:func:`confirm`) over the table
 :data:`TRANSITIONS`, in the manner of h11's ``_state.py``: the processor classifies what a set
 shows into an :class:`ApertureEvent`, the table says what happens.
+
+The table knows nothing of fringes: it only moves the aperture in use, the pending one and the
+watch between fields. Every instrument's processor uses it: the interferometers' pixel apertures,
+and a Shack-Hartmann sensor's set of lit lenslets (an :class:`~wavestack.pipeline.Aperture` on the
+lenslet grid, with or without a watch).
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Final
 
 if TYPE_CHECKING:
-    from wavestack.pipeline import Aperture, ApertureWatch
+    from ..aperture import Aperture, ApertureWatch
 
 
 class AperturePhase(enum.Enum):
@@ -71,10 +76,10 @@ IMPOSSIBLE: Final = frozenset({
 
 @dataclass(frozen=True, eq=False)
 class Detection:
-    """A full detection's outcome: the aperture (eroded as the fit uses it) and its per-frame watch."""
+    """A full detection's outcome: the aperture as the fit uses it and its per-frame watch (None: none)."""
 
     aperture: Aperture
-    watch: ApertureWatch
+    watch: ApertureWatch | None
 
 
 @dataclass(frozen=True, eq=False)

@@ -6,7 +6,7 @@ import itertools
 
 import pytest
 
-from wavestack.station import (
+from wavestack.pipeline.instrument import (
     ApertureAction,
     ApertureEvent,
     AperturePhase,
@@ -14,7 +14,7 @@ from wavestack.station import (
     Detection,
     confirm,
 )
-from wavestack.station.aperture_confirmation import IMPOSSIBLE, TRANSITIONS
+from wavestack.pipeline.instrument import IMPOSSIBLE, TRANSITIONS
 
 # Stand-ins: the transition function only moves apertures and watches between fields.
 OLD, CANDIDATE, FOUND = object(), object(), object()
