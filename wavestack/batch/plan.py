@@ -25,6 +25,7 @@ import numpy as np
 
 from wavestack import __version__
 from wavestack.pipeline import InputError
+from wavestack.pipeline.formats import check_allocation
 from wavestack.recording import FORMAT_NAME, RecordingReader
 from wavestack.recording.hdf5_open import open_hdf5_readonly
 
@@ -171,20 +172,27 @@ def _block_bounds(sets: int, starts: Sequence[int], min_sets: int) -> list[int]:
 
 
 def _inspect(path: str) -> tuple[Kind, int, list[int], str]:
-    """(kind, sets or maps, positions where an aperture was adopted, message)."""
+    """(kind, sets or maps, positions where an aperture was adopted, message).
+
+    A file that cannot be analysed is planned as ``unreadable`` with the reason naming it, whatever
+    went wrong in reading it: one bad file fails its own task, never the campaign's planning.
+    """
     try:
-        opened = open_hdf5_readonly(Path(path))
-    except InputError as error:  # not HDF5, a damaged superblock: reported in the results, not fatal
+        return _identify(path)
+    except InputError as error:
         return "unreadable", 0, [], str(error)
+    except Exception as error:  # noqa: BLE001 - a reader's bug on a hostile file: that file only, named
+        return "unreadable", 0, [], f"{path}: cannot be read ({type(error).__name__}: {error})"
+
+
+def _identify(path: str) -> tuple[Kind, int, list[int], str]:
+    opened = open_hdf5_readonly(Path(path))  # not HDF5, a damaged superblock: InputError
     try:
         attrs = opened.file.attrs
         found = attrs.get("format")
         found = found.decode("utf-8", "replace") if isinstance(found, bytes) else found
         if found == POLISH_FORMAT:
-            surfaces = opened.file.get("measurements/surface_nm")
-            if surfaces is None or "aperture_mask" not in opened.file:
-                return "unreadable", 0, [], f"{path}: polish campaign record without stored surface maps"
-            return "polish", int(surfaces.shape[0]), [], ""
+            return "polish", _polish_maps(opened.file, path), [], ""
         if found == ALIGN_FORMAT:
             return "unsupported", 0, [], (f"{path}: an alignment record (wavestack align) holds fitted terms and "
                                           "hexapod moves, not frames or maps; not a station recording, nothing "
@@ -192,22 +200,30 @@ def _inspect(path: str) -> tuple[Kind, int, list[int], str]:
         if found != FORMAT_NAME:
             return "unsupported", 0, [], (f"{path}: not a station recording (format {found!r}; expected "
                                           f"{FORMAT_NAME!r} from wavestack run --record)")
-        from_sets = _first_sets(opened.file)
     finally:
         opened.file.close()
-    try:
-        with RecordingReader(path) as reader:
-            return "station", reader.n_sets, _adoption_positions(reader.set_indices, from_sets), ""
-    except InputError as error:
-        return "unreadable", 0, [], str(error)
+    with RecordingReader(path) as reader:  # refuses what the file declares but does not hold, before allocating
+        return "station", reader.n_sets, _adoption_positions(reader.set_indices, reader.aperture_sets), ""
 
 
-def _first_sets(file: h5py.File) -> np.ndarray:
-    """The station set of each recorded aperture (empty when unreadable: the recording is then one task)."""
-    try:
-        return np.asarray(file["apertures/from_set"][:], dtype=np.int64)
-    except (KeyError, OSError, RuntimeError, ValueError, TypeError):
-        return np.zeros(0, np.int64)
+def _polish_maps(file: h5py.File, path: str) -> int:
+    """The surface maps of a polish campaign record, checked to be what the task may read (one block).
+
+    Raises
+    ------
+    InputError
+        No stored maps or aperture, shapes that disagree, or maps beyond the memory budget.
+    """
+    surfaces, mask, times = (file.get(name) for name in ("measurements/surface_nm", "aperture_mask",
+                                                          "measurements/exposure_unix_s"))
+    if not all(isinstance(d, h5py.Dataset) for d in (surfaces, mask, times)):
+        raise InputError(f"{path}: polish campaign record without stored surface maps, aperture and times")
+    if surfaces.ndim != 3 or mask.shape != surfaces.shape[1:] or times.ndim != 1:
+        raise InputError(f"{path}: polish campaign record: surface maps {surfaces.shape}, aperture {mask.shape}, "
+                         f"times {times.shape}; expected (n, H, W), (H, W) and (n,)")
+    check_allocation(path, "surface maps", (2 * surfaces.shape[0], *surfaces.shape[1:]), 8)  # read and stacked
+    check_allocation(path, "exposure times", times.shape, 8)
+    return int(surfaces.shape[0])
 
 
 def _adoption_positions(set_indices: np.ndarray, from_sets: np.ndarray) -> list[int]:

@@ -26,9 +26,9 @@ from wavestack.config.schema import ConfigError, device_tables, load_toml, parse
 from wavestack.drivers.plc.jobs import JobLimits
 from wavestack.drivers.plc.register_map import RegisterMap
 from wavestack.drivers.plc.transport import LinkTiming
-from wavestack.simulators.plc.machine import MachineSimSettings, PolishingMachine, RemovalTarget
+from wavestack.simulators.plc import MachineSimSettings, PolishingMachine, RemovalTarget, read_key_file
 from wavestack.simulators.plc.polishing import PolishingStation
-from wavestack.simulators.plc.program import PlcSimLayout
+from wavestack.simulators.plc import PlcSimLayout
 
 __all__ = ["MachineModelSettings", "PlcConfig", "PlcLinkSettings", "PlcSimulatorSettings", "PolishingModelSettings",
            "load_plc_config", "parse_plc_config"]
@@ -75,7 +75,11 @@ class PlcLinkSettings:
                                        doc="first of 8 registers: job action, id, CRC-32, points, total dwell")
     machine_register: int | None = setting(320, minimum=0, maximum=65529,
                                            doc="first of 7 read-only registers: state, reason, job id, progress")
+    owner_register: int | None = setting(12, minimum=0, maximum=65532,
+                                         doc="first of 4 registers: the host's ownership token (FC16, whole)")
     job_folder: str | None = setting(None, doc="where the host writes job files (the machine's share)")
+    job_key_file: str | None = setting(None, doc="a file holding the job key (hex): job files carry their "
+                                                 "HMAC-SHA256 and the machine runs only those; relative to this file")
     job_max_points: int = setting(500_000, minimum=1, maximum=2**32 - 1, doc="most points in one job")
     job_max_total_dwell_s: float = setting(36_000.0, minimum=0.001, maximum=1e7, doc="longest total dwell, s")
     job_max_dwell_per_point_s: float = setting(60.0, minimum=0.001, maximum=1e5, doc="longest dwell at a point")
@@ -114,7 +118,7 @@ class PlcLinkSettings:
             block_write_function=self.command_write_function_code,
             self_check_word_order=self.self_check_word_order, command_word_order=self.command_word_order,
             output_word_order=self.output_word_order, job_register=self.job_register,
-            machine_register=self.machine_register)
+            machine_register=self.machine_register, owner_register=self.owner_register)
 
     def job_limits(self) -> JobLimits:
         """The host's job limits (raises ValueError for an empty travel)."""
@@ -203,7 +207,15 @@ class PlcConfig:
             watchdog_timeout_s=link.watchdog_timeout_s,
             read_function=link.read_function_code, single_write_function=link.single_write_function_code,
             pass_duration_s=self.simulator.polishing.pass_duration_s if self.simulator else 0.0,
-            job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order)
+            job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order,
+            owner_register=link.owner_register)
+
+    def job_key_path(self) -> Path | None:
+        """``[plc] job_key_file``, relative to the configuration's folder (None: no job key)."""
+        if self.link.job_key_file is None:
+            return None
+        path = Path(self.link.job_key_file).expanduser()
+        return path if path.is_absolute() or self.source == "built-in defaults" else Path(self.source).parent / path
 
     def machine_settings(self, job_folder: str | Path | None = None) -> MachineSimSettings:
         """The simulated machine's settings from ``[plc.simulator.machine]`` (defaults if absent).
@@ -216,6 +228,11 @@ class PlcConfig:
             No job folder anywhere.
         """
         model = (self.simulator.machine if self.simulator else None) or MachineModelSettings()
+        key_file = self.job_key_path()
+        try:
+            job_key = None if key_file is None else read_key_file(key_file)
+        except ValueError as error:
+            raise ConfigError(f"{self.source}: [plc] job_key_file: {error}") from None
         folder = job_folder or model.job_folder or self.link.job_folder
         if folder is None:
             raise ConfigError(f"{self.source}: the simulated machine needs a job folder: [plc.simulator.machine] "
@@ -226,7 +243,7 @@ class PlcConfig:
             efficiency_spread=model.efficiency_spread, noise_nm=model.noise_nm, seed=model.seed,
             max_points=model.max_points, max_total_dwell_s=model.max_total_dwell_s,
             max_dwell_per_point_s=model.max_dwell_per_point_s, max_feed_mm_s=model.max_feed_mm_s,
-            travel_x_mm=model.travel_x_mm, travel_y_mm=model.travel_y_mm)
+            travel_x_mm=model.travel_x_mm, travel_y_mm=model.travel_y_mm, job_key=job_key)
 
     def polishing_machine(self, target: RemovalTarget | None, job_folder: str | Path | None = None
                           ) -> PolishingMachine:

@@ -24,7 +24,7 @@ from wavestack.drivers.plc import CommandLimits, PolishingLink
 from wavestack.drivers.genicam.camera_verbs import GenICamCamera
 from wavestack.drivers.gige import GigECamera
 from wavestack.drivers.u3v import U3VCamera
-from wavestack.drivers.u3v.usb_tcp import UsbTcpBackend, parse_usbtcp_url
+from wavestack.drivers.usb_tcp import UsbTcpBackend, parse_usbtcp_url
 from wavestack.config import BIT_DEPTH, StationConfig, build_calibration, build_piezo, build_simulated_device
 from wavestack.simulators import attach_simulated_device, register_serial_simulators
 from wavestack.simulators.bench import FrameTruth, SimulatedInterferometer, SimulatedShackHartmann
@@ -164,12 +164,12 @@ def _truth_check(bench: SimulatedInterferometer | SimulatedShackHartmann | None,
     return None
 
 
-def _usb_backend(url: str, stack: ExitStack) -> UsbTcpBackend | None:
+def _usb_backend(url: str, stack: ExitStack, timeout_s: float) -> UsbTcpBackend | None:
     """The pyusb backend of a camera URL: libusb (None) for ``usb://``, the TCP bus for ``usbtcp://``."""
     if not url.startswith("usbtcp://"):
         return None
     host, port, _ = parse_usbtcp_url(url)
-    backend = UsbTcpBackend(host, port)
+    backend = UsbTcpBackend(host, port, io_timeout_s=timeout_s)
     stack.callback(backend.close)
     return backend
 
@@ -187,7 +187,7 @@ def _open_camera(config: StationConfig, bench: SimulatedInterferometer | Simulat
     if bench is not None:
         return U3VCamera.open(backend=bench.backend, timeout_s=settings.timeout_s,
                               ring_capacity=settings.ring_capacity)
-    return U3VCamera.open(backend=_usb_backend(settings.url, stack), serial=settings.serial,
+    return U3VCamera.open(backend=_usb_backend(settings.url, stack, settings.timeout_s), serial=settings.serial,
                           timeout_s=settings.timeout_s, ring_capacity=settings.ring_capacity)
 
 
