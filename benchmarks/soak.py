@@ -64,8 +64,10 @@ from soak_monitor import Monitor
 from soak_operator import Operator
 from soak_trips import TripLimits
 from soak_report import growth_sites, render_text, rss_verdict, verdict_json
+from soak_polish import PolishRunner
 
 from wavestack.config import StationConfig, load_station_config
+from wavestack.config.polishing import load_polishing_config
 from wavestack.station import Station, StationSummary, counter_lines, open_station_devices
 
 FAILURE_KINDS = ("station_crashes", "thread_exceptions", "stuck", "trip_failures", "failsafe_trips",
@@ -268,7 +270,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--seed", type=int, default=1, help="seed of the fault schedule and its parameters")
     p.add_argument("--fault-every-s", type=float, default=10.0, help="mean time between faults; 0: no faults")
     p.add_argument("--faults", help="comma list of fault kinds or devices (camera, piezo, plc); default all")
-    p.add_argument("--config", type=Path, help="station TOML (default: the embedded simulated station)")
+    p.add_argument("--config", type=Path, help="station TOML (default: the embedded simulated station; with "
+                                               "--polish, the embedded polishing station)")
+    p.add_argument("--polish", action="store_true",
+                   help="soak the polishing loop: campaigns back to back with job hand-offs (soak_polish)")
+    p.add_argument("--polish-runs", type=int, default=2, help="runs per polishing campaign (default 2)")
     p.add_argument("--warmup-s", type=float, default=None, help="RSS verdict from here on (default: 20 %% of the run)")
     p.add_argument("--sample-every-s", type=float, default=5.0)
     p.add_argument("--table-every-s", type=float, default=30.0, help="rows of the printed table")
@@ -280,6 +286,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--on-failure", choices=("restart", "continue", "stop"), default="restart",
                    help="after a crash or a stuck station: build a fresh one (default), or not (a stuck one "
                         "is only reported with 'continue'; a crash ends the run), or stop")
+    p.add_argument("--slope-last-s", type=float, default=0.0,
+                   help="also judge the slope of the peak RSS over the last S seconds (a shift: 1800 of a 3600 s "
+                        "run), target --max-slope-mb-min; 0: not judged")
+    p.add_argument("--max-slope-mb-min", type=float, default=0.1, help="the tail slope's target, MB/min")
     p.add_argument("--tracemalloc", action="store_true", help="print the allocation sites that grew")
     p.add_argument("--json", action="store_true", help="one JSON object instead of the text report")
     p.add_argument("--list-faults", action="store_true", help="print the fault kinds and exit")
@@ -323,7 +333,10 @@ def main(argv: list[str] | None = None) -> int:
         for kind in FAULT_KINDS + EXTRA_KINDS:
             print(f"{kind.name:24s} {kind.device:7s} {kind.what}; expects {' or '.join(kind.expects) or 'nothing'}")
         return 0
-    config = load_station_config(args.config)
+    polishing = load_polishing_config(args.config) if args.polish else None
+    config = polishing.station if polishing is not None else load_station_config(args.config)
+    if polishing is not None:
+        args.on_failure = "continue"  # a fault ends a campaign and the next begins: no station is rebuilt
     present = {"camera"} if config.camera.simulated else set()
     present |= {"piezo"} if config.phase_stepping and config.pzt is not None and config.pzt.url.startswith("sim://") \
         else set()
@@ -345,7 +358,8 @@ def main(argv: list[str] | None = None) -> int:
         tracemalloc.start(1)
     started, load_at_start = time.monotonic(), os.getloadavg()
     observer = Observer(started)
-    runner = StationRunner(config, observer, failures, restart_on_failure=args.on_failure == "restart")
+    runner: Any = PolishRunner(polishing, observer, args.polish_runs) if polishing is not None else \
+        StationRunner(config, observer, failures, restart_on_failure=args.on_failure == "restart")
     scheduler = FaultScheduler(schedule, runner, observer, failures)
     scheduler.verbose = not args.json
     plc = config.plc.link if config.plc is not None and config.outputs.enabled else None
@@ -397,8 +411,27 @@ def _report(args: argparse.Namespace, config: StationConfig, schedule: list[Sche
     rss = rss_verdict(monitor.samples, args.warmup_s, measure="peak")
     instant = rss_verdict(monitor.samples, args.warmup_s, measure="rss")
     report = verdict_json(run, monitor.samples, rss, observer.windows, failures.entries, sites, instant)
+    lines: list[str] = []
+    if isinstance(runner, PolishRunner):  # the polishing loop: nothing applied twice, nothing lost
+        report["polish"] = runner.final | {"error": runner.error}
+        report["targets"]["polish_nothing_twice_nothing_lost"] = not runner.final.get("problems", ["no checks"]) \
+            and not runner.error
+        report["passed"] = all(report["targets"].values())
+        lines.append(f"polishing: {runner.final.get('campaigns', 0)} campaigns "
+                     f"({runner.final.get('campaign_ends', {})}), {runner.final.get('jobs', 0)} jobs handed off "
+                     f"({runner.final.get('machine_states', {})}), the machine loaded "
+                     f"{runner.final.get('machine_ids', 0)}; problems: {runner.final.get('problems') or 'none'}"
+                     f"{'; ' + runner.error if runner.error else ''}")
+    if args.slope_last_s > 0:  # a shift: the slope over the last stretch, once bounded histories are full
+        tail = rss_verdict(monitor.samples, max(args.warmup_s, observer.now() - args.slope_last_s), measure="peak")
+        report["rss_tail"] = {"last_s": args.slope_last_s, "slope_mb_per_min": tail.slope_mb_per_min,
+                              "samples": tail.samples, "mean_mb": tail.mean_mb, "target_mb_per_min": args.max_slope_mb_min}
+        report["targets"]["rss_tail_slope"] = bool(tail.slope_mb_per_min <= args.max_slope_mb_min)
+        report["passed"] = all(report["targets"].values())
+        lines.append(f"peak RSS slope over the last {args.slope_last_s:g} s: {tail.slope_mb_per_min:+.3f} MB/min "
+                     f"({tail.samples} samples, mean {tail.mean_mb:.1f} MB; target <= {args.max_slope_mb_min:g})")
     summary = runner.summaries[-1] if runner.summaries else None
-    lines = [f"station runs {run['station_runs']} (crashes {runner.crashes}, restarts {runner.restarts}); "
+    lines += [f"station runs {run['station_runs']} (crashes {runner.crashes}, restarts {runner.restarts}); "
              f"log: " + ", ".join(f"{k} {v}" for k, v in run["log_counts"].items())]
     if summary is not None:
         lines += [f"last station's summary: {summary.results} results ({summary.valid} valid) in "
@@ -412,7 +445,7 @@ def _report(args: argparse.Namespace, config: StationConfig, schedule: list[Sche
         print(json.dumps(report))
     else:
         print(render_text(report, monitor.samples, observer.windows, args.table_every_s, lines), end="")
-    return 0 if report["passed"] and summary is not None else 1
+    return 0 if report["passed"] and (summary is not None or isinstance(runner, PolishRunner)) else 1
 
 
 if __name__ == "__main__":

@@ -156,6 +156,7 @@ class Observer:
         signals = _classify(result)
         with self._lock:
             window = self.current
+            seen_estop = window.counts.get("estop_seen", 0) > 0  # by an earlier result of this fault
             self.results += 1
             self.results_this_station += 1
             window.results += 1
@@ -172,8 +173,13 @@ class Observer:
                 if key in window.reasons or len(window.reasons) < _MAX_REASONS:
                     window.reasons[key] += 1
             self.sent_this_station |= "sent" in signals
-            if "sent" in signals and window.clear_t_s is not None and t < window.clear_t_s:
+            active = window.clear_t_s is not None and t < window.clear_t_s
+            if "sent" in signals and active:
                 window.counts["sent_while_active"] += 1  # a command while the fault was on
+            status = (result.output.command.status or "") if result.output is not None else ""
+            attempted = "sent" in signals or "NOT_SENT" in status  # sent, or sent and refused by the PLC
+            if attempted and active and (seen_estop or "estop_seen" in signals):
+                window.counts["commanded_after_estop_seen"] += 1  # the station knew, and still sent
             if "sent" in signals and cleared and window.first_sent_after_clear_s is None:
                 window.first_sent_after_clear_s = t - window.clear_t_s
             self._check_counters(result.counters, t)

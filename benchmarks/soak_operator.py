@@ -56,7 +56,7 @@ class Operator:
         except Exception as error:  # noqa: BLE001 - the operator tries again; a PLC that stays out shows as stuck
             self.errors.append(f"t={t_s:.1f} s: re-arm failed: {type(error).__name__}: {error}")
             return None
-        rearm = Rearm(t_s, incarnation, t_s - tripped_since_s, len(plc_simulator.accepted_commands),
+        rearm = Rearm(t_s, incarnation, t_s - tripped_since_s, plc_simulator.program.accepted_count,
                       "tripped" if status.watchdog_tripped else "ok")
         self.rearms.append(rearm)
         return rearm
@@ -65,5 +65,5 @@ class Operator:
         """For each re-arm: the commands the PLC accepted after it (-1: another station's, not counted)."""
         if plc_simulator is None:
             return [-1] * len(self.rearms)
-        accepted = len(plc_simulator.accepted_commands)
+        accepted = plc_simulator.program.accepted_count  # all of them (the kept history is bounded)
         return [accepted - r.accepted_before if r.incarnation == incarnation else -1 for r in self.rearms]

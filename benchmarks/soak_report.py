@@ -20,12 +20,15 @@ __all__ = ["GrowthSite", "RssVerdict", "Sample", "fault_problems", "growth_sites
            "unsafe_commands", "verdict_json"]
 
 _KINDS = {kind.name: kind for kind in FAULT_KINDS}
-# faults during which no command may reach the PLC (issue 13: commands while the PLC is not scanning), and
-# how many may: the echo had advanced since the previous command when the echo froze, so the link may
-# send one more command before it can see that the PLC stopped scanning (and the result of a command
-# sent just before the fault is counted in its window); a second one had no scan before it
-_NO_COMMANDS_WHILE = {"plc_freeze_echo": ("the heartbeat echo was frozen (PLC not scanning)", 1),
-                      "plc_estop": ("the e-stop was pressed", 0)}
+# faults during which no command may reach the PLC (issue 13: commands while the PLC is not scanning), how
+# many may, and which count judges it: the echo had advanced since the previous command when the echo
+# froze, so the link may send one more command before it can see that the PLC stopped scanning (and the
+# result of a command sent just before the fault is counted in its window); a second one had no scan
+# before it. The e-stop is in the status the station reads: once a result of the fault has shown it, no
+# command may be tried (sent, or sent and refused); a command the PLC accepted just before the e-stop,
+# whose result arrives after it, is not one
+_NO_COMMANDS_WHILE = {"plc_freeze_echo": ("the heartbeat echo was frozen (PLC not scanning)", 1, "sent_while_active"),
+                      "plc_estop": ("the e-stop was pressed and seen", 0, "commanded_after_estop_seen")}
 RECOVERY_GRACE_S = 5.0  # a fault followed this soon by the next one is not judged on its recovery
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -151,7 +154,8 @@ def unsafe_commands(window: Window) -> int:
     """Commands sent during a fault that forbids them, beyond those the link may send before it can see it."""
     if window.kind not in _NO_COMMANDS_WHILE:
         return 0
-    return max(0, window.counts.get("sent_while_active", 0) - _NO_COMMANDS_WHILE[window.kind][1])
+    _, allowed, count = _NO_COMMANDS_WHILE[window.kind]
+    return max(0, window.counts.get(count, 0) - allowed)
 
 
 def fault_problems(window: Window) -> list[str]:
@@ -169,7 +173,7 @@ def fault_problems(window: Window) -> list[str]:
         problems.append("UNACCOUNTED (expected " + " or ".join(kind.expects) + ")")
     unsafe = unsafe_commands(window)
     if unsafe:
-        what, allowed = _NO_COMMANDS_WHILE[window.kind]
+        what, allowed, _ = _NO_COMMANDS_WHILE[window.kind]
         problems.append(f"UNSAFE: {unsafe} commands sent while {what}" + (f" (beyond the {allowed} the link may send "
                                                                             "before it can see it)" if allowed else ""))
     if window.trips_failure > 0:

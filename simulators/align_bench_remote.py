@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import socket
 import threading
+import time
 from contextlib import ExitStack
 
 from wavestack.simulators.align_bench import AlignmentBench, SurfaceCoupling
@@ -124,13 +125,19 @@ class RemoteAlignBench:
 class SerialTcpBridge:
     """A serial device on raw TCP, as a serial device server ("TCP server" mode) puts one on a network.
 
-    One client at a time; bytes in are fed to the device, its replies go out as its delivery plan
-    schedules them (:class:`~wavestack.simulators.mdt693b.PtyBridge` does the same on a pty).
-    A context manager; :meth:`close` ends the thread and closes every socket.
+    One client at a time, as a device server serves its port; bytes in are fed to the device, its
+    replies go out as its delivery plan schedules them (:class:`~wavestack.simulators.mdt693b.PtyBridge`
+    does the same on a pty). A client that sends nothing for ``idle_timeout_s`` is disconnected (a
+    device server's inactivity timeout), so a silent peer cannot keep the port from the station
+    for longer; the station's driver reconnects after it. A context manager; :meth:`close` ends the
+    thread and closes every socket.
     """
 
-    def __init__(self, device: MDT693BDevice, *, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(self, device: MDT693BDevice, *, host: str = "127.0.0.1", port: int = 0,
+                 idle_timeout_s: float = 30.0) -> None:
         self.device = device
+        self.idle_timeout_s = idle_timeout_s
+        self.idle_disconnects = 0  #: clients dropped for silence
         self._listener = socket.create_server((host, port), backlog=1)
         self._listener.settimeout(_BRIDGE_POLL_S)
         self.port = self._listener.getsockname()[1]
@@ -163,15 +170,22 @@ class SerialTcpBridge:
                 self._talk(client)
 
     def _talk(self, client: socket.socket) -> None:
+        heard = time.monotonic()
         while not self._stop.is_set():
             try:
                 data = client.recv(4096)
             except TimeoutError:
+                if time.monotonic() - heard > self.idle_timeout_s:
+                    logger.warning("serial bridge %d: a client silent for %.0f s was disconnected", self.port,
+                                   self.idle_timeout_s)
+                    self.idle_disconnects += 1
+                    return
                 continue
             except OSError:
                 return
             if not data:
                 return
+            heard = time.monotonic()
             for delay, chunk in self.device.delivery_plan(self.device.feed(data)):
                 if delay and self._stop.wait(delay):
                     return

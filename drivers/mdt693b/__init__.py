@@ -3,7 +3,7 @@
 ``protocol`` encodes and parses the ASCII protocol (pure, fuzzable), ``command_sets`` holds the
 controller's own command set and the older MDT693A one (its compatibility mode; an MDT693A speaks
 only that) as data, ``limits`` combines the software, device and limit-switch voltage ranges (pure),
-``line`` runs the command exchanges on the serial port, ``driver`` knows what to ask
+``driver`` runs the command exchanges on the one byte link (:mod:`wavestack.drivers.link`) and knows what to ask
 (:class:`MDT693B`), ``phase_stepping`` sequences piezo steps with camera frames for
 phase-shifting interferometry.
 """

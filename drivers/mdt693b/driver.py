@@ -1,11 +1,11 @@
 """Driver for the Thorlabs MDT693B (3-axis) / MDT694B (1-axis) open-loop piezo controller.
 
-The driver *has* a serial connection built with ``serial.serial_for_url``, so the same code runs on
-``/dev/ttyUSB0``, ``COM3``, a pseudo-terminal path, ``socket://host:port`` and ``sim://mdt693b``.
-Bytes are encoded and parsed by :mod:`wavestack.drivers.mdt693b.protocol`, the command exchanges
-run on a :class:`~wavestack.drivers.mdt693b.line.ControllerLine` and the voltage limits are combined
-by :mod:`wavestack.drivers.mdt693b.limits`; this module knows what to ask, enforces the limits and
-handles the errors.
+The driver *has* a :class:`~wavestack.drivers.link.ByteLink` (115200 8N1), so the same code runs on
+``/dev/ttyUSB0``, ``COM3``, a pseudo-terminal path, ``socket://host:port``, ``rfc2217://``,
+``tcp://host:port`` and ``sim://mdt693b``. Bytes are encoded and framed by
+:mod:`wavestack.drivers.mdt693b.protocol` (a reply ends at the prompt), the voltage limits are
+combined by :mod:`wavestack.drivers.mdt693b.limits`; this module knows what to ask, enforces the
+limits and handles the errors.
 
 On :meth:`MDT693B.open` the driver sends ``echo=0`` (the echo doubles the traffic and would need a
 second parse path; whichever prompt, ``>`` or ``*``, ends that reply is the device's prompt from then
@@ -31,28 +31,33 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
-from types import TracebackType
+from functools import partial
 
 from wavestack.drivers._checks import is_finite_real
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, LimitError, ProtocolError
+from wavestack.drivers.link import ByteLink, LinkedDevice
 from wavestack.drivers.mdt693b.command_sets import (
     A_COMMANDS,
     B_COMMANDS,
     COMMAND_SETS,
+    CommandSet,
     command_set_after_probe,
     encode_compatibility_mode,
 )
 from wavestack.drivers.mdt693b.limits import AxisLimits, _effective_limits, _on_wire
-from wavestack.drivers.mdt693b.line import ControllerLine
 from wavestack.drivers.mdt693b.protocol import (
     AXES,
     PROMPTS,
     DeviceIdentity,
+    Reply,
     encode_command,
     parse_id,
+    parse_number,
     parse_vlimit,
+    split_reply,
 )
 
 __all__ = ["MDT693B", "AxisLimits", "VoltageReading"]
@@ -60,6 +65,8 @@ __all__ = ["MDT693B", "AxisLimits", "VoltageReading"]
 logger = logging.getLogger(__name__)
 
 _HARDWARE_MAX_V = 150.0
+_MODE_HINT = (" (an MDT693A answer: the controller speaks the MDT693A command set, its compatibility mode is "
+              "on; construct the driver with command_set='auto' or 'mdt693a', or switch the mode off)")
 
 
 @dataclass(frozen=True)
@@ -88,7 +95,7 @@ class VoltageReading:
     clamped: bool
 
 
-class MDT693B:
+class MDT693B(LinkedDevice):
     """Thorlabs MDT693B / MDT694B piezo controller on a serial URL.
 
     Parameters
@@ -144,7 +151,10 @@ class MDT693B:
         self.timeout_s = float(timeout_s)
         self.configured_command_set = command_set
         self._lock = threading.RLock()
-        self._line = ControllerLine(url, lambda: self.name)
+        self._link = ByteLink(url, lambda: self.name)
+        self._commands: CommandSet = B_COMMANDS  # in the A set an echo is accepted and the resync sends %
+        self._prompt = PROMPTS
+        self._needs_resync = False  # after a garbled or missing reply: the next exchange resynchronises first
         self._identity: DeviceIdentity | None = None
         self._vlimit_v = _HARDWARE_MAX_V
         self._limits: dict[str, AxisLimits] = {}
@@ -156,63 +166,24 @@ class MDT693B:
         model = self._identity.model if self._identity is not None else "MDT693B"
         return f"{model} on {self.url}"
 
-    @property
-    def is_open(self) -> bool:
-        """True between a successful :meth:`open` and :meth:`close` or a lost connection."""
-        return self._line.is_open
+    def _handshake(self, timeout_s: float) -> None:
+        """Synchronise, settle the command set (detect it for ``"auto"``), read identity and limits.
 
-    def open(self, timeout_s: float | None = None) -> None:
-        """Open the port, switch echo off, detect the prompt and read identity and limits.
-
-        Parameters
-        ----------
-        timeout_s
-            Per-exchange timeout, s (default: the constructor's ``timeout_s``).
-
-        Raises
-        ------
-        ValueError
-            The URL's scheme is unknown to pyserial (for ``sim://`` call
-            ``register_serial_simulators()`` first).
-        DeviceDisconnected
-            The port cannot be opened.
-        DeviceTimeout, ProtocolError
-            The controller does not answer, or not like an MDT693B/694B; the port is closed again.
+        Called by :meth:`open` (from :class:`~wavestack.drivers.link.LinkedDevice`): open the port,
+        switch echo off, detect the prompt and read identity and limits; ``timeout_s`` per exchange.
         """
-        timeout = self.timeout_s if timeout_s is None else timeout_s
-        with self._lock:
-            if self._line.is_open:
-                return
-            self._identity = None
-            self._line.open(timeout)
-            try:
-                self._handshake(timeout, self.configured_command_set)
-            except BaseException:
-                self._line.close(forget_loss=False)
-                raise
-            logger.info("%s open: %s command set, firmware %s, limit switch %.0f V, limits %s", self.name,
-                        self._line.commands.name, self._identity.firmware if self._identity else "?", self._vlimit_v,
-                        {axis: (lim.min_v, lim.max_v) for axis, lim in self._limits.items()})
-
-    def close(self) -> None:
-        """Close the port; idempotent. Outputs stay where they are."""
-        with self._lock:
-            self._line.close()
-
-    def __enter__(self) -> MDT693B:
-        self.open()
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 traceback: TracebackType | None) -> None:
-        self.close()
+        self._identity, self._needs_resync, self._prompt = None, False, PROMPTS
+        self._settle_command_set(timeout_s, self.configured_command_set)
+        logger.info("%s open: %s command set, firmware %s, limit switch %.0f V, limits %s", self.name,
+                    self._commands.name, self._identity.firmware if self._identity else "?", self._vlimit_v,
+                    {axis: (lim.min_v, lim.max_v) for axis, lim in self._limits.items()})
 
     # ------------------------------------------------------------------------------ queries
     @property
     def identity(self) -> DeviceIdentity:
         """What ``id?`` reported at open; raises :class:`DeviceDisconnected` before."""
         with self._lock:
-            self._line.require_open()
+            self._link.require_open()
             if self._identity is None:  # unreachable: open() fails without an identity
                 raise DeviceDisconnected(self.name, "no identity; call open() again")
             return self._identity
@@ -221,14 +192,14 @@ class MDT693B:
     def command_set(self) -> str:
         """The command set in use: ``"mdt693b"`` or ``"mdt693a"`` (as detected or configured at open)."""
         with self._lock:
-            self._line.require_open()
-            return self._line.commands.name
+            self._link.require_open()
+            return self._commands.name
 
     @property
     def vlimit_v(self) -> float:
         """Front-panel limit switch as read at open (or the last limit refresh), V."""
         with self._lock:
-            self._line.require_open()
+            self._link.require_open()
             return self._vlimit_v
 
     def limits(self, axis: str) -> AxisLimits:
@@ -243,7 +214,7 @@ class MDT693B:
         """
         self._check_axis(axis)
         with self._lock:
-            self._line.require_open()
+            self._link.require_open()
             return self._limits[axis]
 
     def read_voltage(self, axis: str, *, timeout_s: float) -> float:
@@ -258,7 +229,7 @@ class MDT693B:
         """
         self._check_axis(axis)
         with self._lock:
-            return self._line.query_number(self._line.commands.voltage_query(axis), time.monotonic() + timeout_s)
+            return self._query_number(self._commands.voltage_query(axis), time.monotonic() + timeout_s)
 
     # ----------------------------------------------------------------------------- commands
     def set_voltage(self, axis: str, volts: float, *, timeout_s: float, clamp: bool = False) -> VoltageReading:
@@ -298,7 +269,7 @@ class MDT693B:
             raise ValueError(f"{self.name}: voltage must be a finite number, got {volts!r}")
         deadline = time.monotonic() + timeout_s
         with self._lock:
-            self._line.require_open()
+            self._link.require_open()
             limits = self._limits[axis]
             requested = float(volts)
             commanded = _on_wire(requested, limits)
@@ -309,9 +280,8 @@ class MDT693B:
                                      f"{self.software_max_v:g}], device [{limits.device_min_v:g}, "
                                      f"{limits.device_max_v:g}], limit switch {limits.vlimit_v:g} V); nothing sent")
                 commanded = _on_wire(limits.clamp(requested), limits)
-            with self._line.guard(deadline):
-                self._line.exchange(self._line.commands.set_voltage(axis, commanded), expect_body=False, deadline=deadline)
-            readback = self._line.query_number(self._line.commands.voltage_query(axis), deadline)
+            self._command(self._commands.set_voltage(axis, commanded), expect_body=False, deadline=deadline, raw=True)
+            readback = self._query_number(self._commands.voltage_query(axis), deadline)
             if abs(readback - commanded) > self.readback_tolerance_v:
                 try:
                     self._refresh_limits(time.monotonic() + self.timeout_s)
@@ -347,14 +317,13 @@ class MDT693B:
         wanted = A_COMMANDS if on else B_COMMANDS
         with self._lock:
             deadline = time.monotonic() + timeout_s
-            with self._line.guard(deadline):  # the reply may end in either mode's prompt
-                self._line.exchange(encode_compatibility_mode(on), expect_body=False, deadline=deadline,
-                                    prompts=PROMPTS)
+            with self._guard(deadline):  # the reply may end in either mode's prompt
+                self._exchange(encode_compatibility_mode(on), expect_body=False, deadline=deadline, prompts=PROMPTS)
             self.configured_command_set = wanted.name
             try:
-                self._handshake(timeout_s, wanted.name)
+                self._settle_command_set(timeout_s, wanted.name)
             except (ProtocolError, DeviceTimeout):
-                self._line.needs_resync = True
+                self._needs_resync = True
                 raise
             logger.info("%s: MDT693A compatibility mode %s", self.name, "on" if on else "off")
 
@@ -363,23 +332,22 @@ class MDT693B:
         if axis not in self.axes:
             raise ValueError(f"{self.name}: axis must be one of the configured {self.axes}, got {axis!r}")
 
-    def _handshake(self, timeout_s: float, command_set: str) -> None:
+    def _settle_command_set(self, timeout_s: float, command_set: str) -> None:
         """Synchronise, settle the command set (detect it for ``"auto"``), read identity and limits."""
         deadline = time.monotonic() + timeout_s
         if command_set != "auto":
-            self._line.commands = COMMAND_SETS[command_set]
-            self._line.resync(deadline)
+            self._commands = COMMAND_SETS[command_set]
+            self._resync(deadline)
         else:
-            self._line.commands = B_COMMANDS
-            probe = self._line.resync(deadline, probing=True)
+            self._commands = B_COMMANDS
+            probe = self._resync(deadline, probing=True)
             name = command_set_after_probe(probe, None)
             if name is None:
-                answer = self._line.exchange(encode_command("cm?"), expect_body=True, deadline=deadline,
-                                             prompts=PROMPTS, allow_error=True)
+                answer = self._exchange(encode_command("cm?"), expect_body=True, deadline=deadline, prompts=PROMPTS,
+                                        allow_error=True)
                 name = command_set_after_probe(probe, answer)
-            self._line.commands = COMMAND_SETS[name]
-        commands = self._line.commands
-        body = self._line.command(commands.id_query, expect_body=True, deadline=time.monotonic() + timeout_s).body
+            self._commands = COMMAND_SETS[name]
+        body = self._command(self._commands.id_query, expect_body=True, deadline=time.monotonic() + timeout_s).body
         self._identity = identity = parse_id(body, device=self.name)
         missing = [axis for axis in self.axes if axis not in identity.axes]
         if missing:
@@ -389,15 +357,71 @@ class MDT693B:
 
     def _refresh_limits(self, deadline: float) -> None:
         """Read ``vlimit?`` and each axis's min/max; recompute the effective limits."""
-        with self._line.guard(deadline):
-            commands = self._line.commands
-            vlimit = parse_vlimit(self._line.command(commands.vlimit_query, expect_body=True, deadline=deadline).body,
+        with self._guard(deadline):
+            commands = self._commands
+            vlimit = parse_vlimit(self._command(commands.vlimit_query, expect_body=True, deadline=deadline).body,
                                   device=self.name)
             limits = {}
             for axis in self.axes:
-                device_min = self._line.query_number(commands.min_query(axis), deadline)
-                device_max = self._line.query_number(commands.max_query(axis), deadline)
+                device_min = self._query_number(commands.min_query(axis), deadline)
+                device_max = self._query_number(commands.max_query(axis), deadline)
                 limits[axis] = _effective_limits(self.name, axis, software_min_v=self.software_min_v,
                                                  software_max_v=self.software_max_v, device_min_v=device_min,
                                                  device_max_v=device_max, vlimit_v=vlimit)
         self._vlimit_v, self._limits = vlimit, limits
+
+    # ----------------------------------------------------------------------------- exchanges
+    def _query_number(self, command: str, deadline: float) -> float:
+        """Send a query and parse its numeric reply (bracketed or bare)."""
+        return parse_number(self._command(command, expect_body=True, deadline=deadline).body, device=self.name)
+
+    def _command(self, command: str | bytes, *, expect_body: bool, deadline: float, raw: bool = False) -> Reply:
+        """Send one command (resynchronising first if due) and return its reply; ``raw``: already encoded."""
+        with self._guard(deadline):
+            data = command if raw else encode_command(command)
+            assert isinstance(data, bytes)
+            return self._exchange(data, expect_body=expect_body, deadline=deadline)
+
+    @contextmanager
+    def _guard(self, deadline: float) -> Iterator[None]:
+        """Resync first if due (within ``deadline``); flag a resync after a garbled or missing reply."""
+        self._link.require_open()
+        try:
+            if self._needs_resync:
+                self._resync(deadline)
+            yield
+        except (ProtocolError, DeviceTimeout):
+            self._needs_resync = True
+            raise
+
+    def _exchange(self, data: bytes, *, expect_body: bool, deadline: float, prompts: bytes | None = None,
+                  allow_error: bool = False) -> Reply:
+        """Write one command (stale input discarded first) and read its reply until the prompt.
+
+        In the A command set an echo of the command may come first. ``allow_error``: return a
+        rejection instead of raising :class:`ProtocolError`.
+        """
+        command = data.rstrip(b"\r")
+        compat = self._commands is A_COMMANDS
+        framing = partial(split_reply, echo_of=command if compat else None, expect_body=expect_body,
+                          prompts=prompts or self._prompt, device=self.name, echo_optional=compat)
+        reply = self._link.exchange(data, framing, deadline, during=repr(command.decode("ascii")), fresh=True)
+        if reply.error is not None and not allow_error:
+            raise ProtocolError(self.name, f"controller rejected {command.decode('ascii')!r}: {reply.error}"
+                                f"{_MODE_HINT if reply.prompt == '!' and not compat else ''}")
+        return reply
+
+    def _resync(self, deadline: float, *, probing: bool = False) -> Reply:
+        """Send ``echo=0`` (``%`` in the A set), wait for a prompt, then for the line to fall quiet.
+
+        ``probing``: an ``!`` answer to ``echo=0`` is returned (it tells the command set) instead of
+        raising. Returns the answer to the command sent.
+        """
+        compat = self._commands is A_COMMANDS
+        reply = self._exchange(encode_command(A_COMMANDS.vlimit_query if compat else "echo=0"), expect_body=False,
+                               deadline=deadline, prompts=PROMPTS, allow_error=probing)
+        self._prompt = b"*" if compat or reply.prompt == "!" else reply.prompt.encode()
+        self._link.drain(deadline)
+        self._needs_resync = False
+        logger.debug("%s: synchronised, prompt %r", self.name, self._prompt)
+        return reply

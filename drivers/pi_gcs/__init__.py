@@ -2,8 +2,8 @@
 
 ``protocol`` encodes commands and frames and parses replies (pure, fuzzable), ``error_codes``
 holds the controller error codes with PI's meanings and :class:`GcsError`, ``limits`` the move
-limits and the pure check every move passes, ``link`` the byte link (TCP port 50000 or a
-``serial_for_url`` port), ``driver`` knows what to ask (:class:`PIHexapod`). The axes are
+limits and the pure check every move passes, ``driver`` knows what to ask (:class:`PIHexapod`) on
+the one byte link (:mod:`wavestack.drivers.link`: TCP port 50000 or a ``serial_for_url`` port). The axes are
 configuration: a hexapod's X Y Z U V W by default, a two-axis field stage's ``"1" "2"`` as well.
 
 Pose convention (the driver sends and reads the controller's numbers and computes no rotation;
@@ -24,10 +24,9 @@ References
 
 from __future__ import annotations
 
-from wavestack.drivers.pi_gcs.driver import HEXAPOD_AXES, HexapodMove, PIHexapod
+from wavestack.drivers.pi_gcs.driver import DEFAULT_PORT, HEXAPOD_AXES, HexapodMove, PIHexapod
 from wavestack.drivers.pi_gcs.error_codes import GCS_ERRORS, STOPPED_BY_COMMAND, GcsError, error_meaning
 from wavestack.drivers.pi_gcs.limits import HexapodLimits, move_refusals
-from wavestack.drivers.pi_gcs.link import DEFAULT_PORT
 
 __all__ = [
     "DEFAULT_PORT",

@@ -1,7 +1,11 @@
 """Driver for PI hexapod controllers (C-887 class) and PI stages speaking GCS 2.0 ASCII.
 
-:class:`PIHexapod` *has* a :class:`~wavestack.drivers.pi_gcs.link.GcsLink` (TCP or a pyserial
-URL); bytes are encoded and parsed by :mod:`~wavestack.drivers.pi_gcs.protocol`, moves are checked
+:class:`PIHexapod` *has* a :class:`~wavestack.drivers.link.ByteLink`: ``tcp://HOST[:PORT]`` (C-887
+controllers listen on port 50000, MS204E [1]_) or a pyserial URL (RS-232 ``/dev/ttyUSB0``, ``COM3``, a
+pseudo-terminal, ``socket://``, ``sim://``) at 115200 8N1, the C-887's default RS-232 setting [1]_.
+Bytes are encoded and framed by :mod:`~wavestack.drivers.pi_gcs.protocol` (a reply ends at an LF
+not preceded by a space); after a timeout or a garbled reply the next exchange first drains late
+bytes. Moves are checked
 by :mod:`~wavestack.drivers.pi_gcs.limits`. The axes are configuration, not code: the default is a
 hexapod's X Y Z (mm) U V W (deg), and the same driver drives a two-axis stage with axes
 ``("1", "2")`` or ``("X", "Y")``.
@@ -22,6 +26,11 @@ position read back) and is refused unless the stage forwards it unchanged: a pos
 clipped or shortened.
 
 The pose convention (what X Y Z U V W mean) is in the package docstring.
+
+References
+----------
+.. [1] Physik Instrumente, MS204E, "C-887 Hexapod Controller User Manual" (interfaces: TCP/IP port
+   50000, RS-232 115200 baud).
 """
 
 from __future__ import annotations
@@ -32,23 +41,29 @@ import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from types import MappingProxyType, TracebackType
+from functools import partial
+from types import MappingProxyType
 
 import numpy as np
 
 from wavestack.drivers._checks import check_timeout, is_number
 from wavestack.drivers.errors import DeviceTimeout, LimitError, ProtocolError
+from wavestack.drivers.link import ByteLink, LinkedDevice, line_framing
 from wavestack.drivers.pi_gcs import protocol as gcs
 from wavestack.drivers.pi_gcs.error_codes import NO_ERROR, STOPPED_BY_COMMAND, GcsError
 from wavestack.drivers.pi_gcs.limits import HexapodLimits, move_refusals, safety_limits
-from wavestack.drivers.pi_gcs.link import GcsLink
 from wavestack.drivers.safety import SafetyStage, SafetyStatus
 
-__all__ = ["HEXAPOD_AXES", "HexapodMove", "PIHexapod"]
+__all__ = ["DEFAULT_PORT", "HEXAPOD_AXES", "HexapodMove", "PIHexapod"]
 
 logger = logging.getLogger(__name__)
 
 HEXAPOD_AXES = ("X", "Y", "Z", "U", "V", "W")
+#: PI's TCP port for GCS on its controllers (a ``tcp://HOST`` URL without a port).
+DEFAULT_PORT = 50000
+#: Largest |pivot coordinate| the driver sends, mm: beyond a hexapod's reach by far, and no NaN or
+#: infinity (which the ``SPI`` text would carry as ``nan``/``inf``).
+MAX_PIVOT_MM = 10_000.0
 _ERR = b"ERR?\n"
 _POLL_S = 0.02  # wait_on_target: pause between ONT? polls
 
@@ -69,7 +84,7 @@ class HexapodMove:
     start: Mapping[str, float]
 
 
-class PIHexapod:
+class PIHexapod(LinkedDevice):
     """A PI GCS 2.0 platform (hexapod or stage) on TCP or a serial URL.
 
     Parameters
@@ -112,7 +127,7 @@ class PIHexapod:
         self.timeout_s = float(timeout_s)
         self._model: str | None = None
         self._lock = threading.RLock()
-        self._link = GcsLink(url, lambda: self.name)
+        self._link = ByteLink(url, lambda: self.name, default_port=DEFAULT_PORT)
         self._controller_axes: tuple[str, ...] = ()
         self._travel: Mapping[str, tuple[float, float]] = MappingProxyType({})
         self._stage: SafetyStage | None = None
@@ -123,45 +138,6 @@ class PIHexapod:
     def name(self) -> str:
         """Who this is in messages: ``"C-887 at tcp://10.0.0.5:50000"``."""
         return f"{self._model or 'PI GCS controller'} at {self.url}"
-
-    @property
-    def is_open(self) -> bool:
-        """True between a successful :meth:`open` and :meth:`close` or a lost connection."""
-        return self._link.is_open
-
-    def open(self) -> None:
-        """Connect, clear a stale error, read identity, GCS version, axes and travel range.
-
-        Raises
-        ------
-        DeviceDisconnected
-            Cannot connect.
-        DeviceTimeout, ProtocolError
-            No or unexpected answers, GCS version not 2.x, a configured axis unknown to the
-            controller, soft limits that do not overlap the travel range; the link is closed again.
-        """
-        with self._lock:
-            if self._link.is_open:
-                return
-            self._link.open(self.timeout_s)
-            try:
-                self._handshake()
-            except BaseException:
-                self._link.close()
-                raise
-
-    def close(self) -> None:
-        """Close the connection; idempotent. The platform stays where it is."""
-        with self._lock:
-            self._link.close()
-
-    def __enter__(self) -> PIHexapod:
-        self.open()
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 traceback: TracebackType | None) -> None:
-        self.close()
 
     @property
     def controller_limits(self) -> Mapping[str, tuple[float, float]]:
@@ -213,15 +189,15 @@ class PIHexapod:
         """``#7``: True when the controller is ready, False while busy (e.g. referencing)."""
         with self._lock:
             deadline = time.monotonic() + self.timeout_s
-            self._link.send(gcs.READY_STATUS, deadline)
-            return gcs.parse_ready(self._link.read_raw_reply(deadline, "#7"), device=self.name)
+            self._send(gcs.READY_STATUS, deadline, "#7")
+            return gcs.parse_ready(self._link.receive(line_framing, deadline, during="#7"), device=self.name)
 
     def moving(self) -> dict[str, bool]:
         """``#5``: which of the controller's axes (``SAI?`` order) are moving."""
         with self._lock:
             deadline = time.monotonic() + self.timeout_s
-            self._link.send(gcs.MOTION_STATUS, deadline)
-            lines = self._link.read_reply(deadline, "#5")
+            self._send(gcs.MOTION_STATUS, deadline, "#5")
+            lines = self._reply(deadline, "#5")
             return gcs.parse_motion_mask(lines, self._controller_axes, device=self.name)
 
     # ----------------------------------------------------------------------------- commands
@@ -343,7 +319,7 @@ class PIHexapod:
         with self._lock:
             self._stopped_since_move = True
             deadline = time.monotonic() + self.timeout_s
-            self._link.send(gcs.STOP_ALL, deadline)
+            self._send(gcs.STOP_ALL, deadline, "#24")
             code = self.error_code()
         if code == NO_ERROR:
             logger.warning("%s: ERR? read 0 after #24; PI controllers set 10 (stopped by command)", self.name)
@@ -355,9 +331,17 @@ class PIHexapod:
         self._command(gcs.encode_axis_values("SVO", {axis: bool(on) for axis in self.configured_axes}), "SVO")
 
     def set_pivot(self, pivot: Sequence[float]) -> None:
-        """Set the pivot point (``SPI R x S y T z``), mm; the controller refuses unless U = V = W = 0 (error 9)."""
-        if len(pivot) != 3:
-            raise ValueError(f"{self.name}: pivot must be (x, y, z) in mm, got {pivot!r}")
+        """Set the pivot point (``SPI R x S y T z``), mm; the controller refuses unless U = V = W = 0 (error 9)
+        and within its range (error 17).
+
+        Raises
+        ------
+        ValueError
+            Not three finite numbers within +-``MAX_PIVOT_MM`` (nothing sent).
+        """
+        if len(pivot) != 3 or not all(is_number(v) and abs(v) <= MAX_PIVOT_MM for v in pivot):
+            raise ValueError(f"{self.name}: pivot must be (x, y, z) in mm, each finite and within +-{MAX_PIVOT_MM:g} "
+                             f"mm, got {pivot!r}; nothing sent")
         self._command(gcs.encode_axis_values("SPI", dict(zip("RST", (float(v) for v in pivot)))), "SPI")
 
     def set_velocity(self, velocity: float) -> None:
@@ -371,7 +355,8 @@ class PIHexapod:
         return gcs.parse_error_code(self._query(_ERR, "ERR?", explain=False), device=self.name)
 
     # ----------------------------------------------------------------------------- internals
-    def _handshake(self) -> None:
+    def _handshake(self, timeout_s: float) -> None:
+        """After :meth:`open` connected: clear a stale error, read identity, GCS version, axes, travel range."""
         stale = self.error_code()
         if stale != NO_ERROR:
             logger.warning("%s: cleared a stale controller error %d at connect", self.name, stale)
@@ -421,9 +406,9 @@ class PIHexapod:
         """Send a query and read its reply; a missing reply is explained by ERR? when it can be."""
         with self._lock:
             deadline = time.monotonic() + self.timeout_s
-            self._link.send(data, deadline)
+            self._send(data, deadline, during)
             try:
-                return self._link.read_reply(deadline, during)
+                return self._reply(deadline, during)
             except DeviceTimeout as timeout:
                 if not explain:
                     raise
@@ -439,7 +424,18 @@ class PIHexapod:
         """Send a command that changes state together with ERR?; a nonzero code not in ``allowed`` raises."""
         with self._lock:
             deadline = time.monotonic() + self.timeout_s
-            self._link.send(data + _ERR, deadline)
-            code = gcs.parse_error_code(self._link.read_reply(deadline, f"ERR? after {during}"), device=self.name)
+            self._send(data + _ERR, deadline, during)
+            code = gcs.parse_error_code(self._reply(deadline, f"ERR? after {during}"), device=self.name)
         if code != NO_ERROR and code not in allowed:
             raise GcsError(code, device=self.name, command=data.decode("ascii").strip())
+
+    def _send(self, data: bytes, deadline: float, during: str) -> None:
+        """Write one or more commands; late bytes of a failed exchange are drained first."""
+        if self._link.dirty:
+            self._link.require_open()
+            self._link.drain(deadline)
+        self._link.send(data, deadline, during=during)
+
+    def _reply(self, deadline: float, during: str) -> list[str]:
+        """One complete reply (its lines) before ``deadline``."""
+        return self._link.receive(partial(gcs.split_reply, device=self.name), deadline, during=during)

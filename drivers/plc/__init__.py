@@ -31,7 +31,8 @@ from wavestack.drivers.plc.codec import (
 from wavestack.drivers.plc.commands import CommandLimits, CommandRefused
 from wavestack.drivers.plc.driver import HeartbeatEchoStale, PlcNotReady, PolishingLink
 from wavestack.drivers.plc.job_control import JobNotReady, JobRejected
-from wavestack.drivers.plc.job_file import JobFile, JobReceipt, encode_job_file, job_file_name, used_job_ids, write_job_file
+from wavestack.drivers.plc.job_file import (JobFile, JobReceipt, encode_job_file, job_file_name, read_job_key,
+                                            used_job_ids, write_job_file)
 from wavestack.drivers.plc.jobs import (JobAction, JobLimits, JobReason, JobRefused, JobSummary, MachineState,
                                         MachineStatus, decode_machine)
 from wavestack.drivers.plc.register_map import RegisterBlock, RegisterMap, WriteRefused
@@ -79,5 +80,6 @@ __all__ = [
     "job_file_name",
     "round_to_float32",
     "used_job_ids",
+    "read_job_key",
     "write_job_file",
 ]

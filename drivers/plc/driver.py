@@ -3,7 +3,8 @@
 :class:`PolishingLink` owns one :class:`~wavestack.drivers.plc.transport.ModbusTransport` (a
 pymodbus ``ModbusTcpClient``) and adds what a closed loop needs from a PLC link:
 
-- a heartbeat the host increments every cycle, with a check that the PLC logic echoes it;
+- a heartbeat the host increments every cycle, with a check that the PLC logic echoes it, and the
+  host's ownership of the PLC (:mod:`.heartbeat`);
 - a command id / acknowledge handshake: a command takes effect once, when the PLC sees its id
   change; within one call a command whose reply was lost is resent with the same id (harmless);
 - a gate before every command (:mod:`.gate`): a status read, and nothing is sent unless the PLC is
@@ -43,7 +44,8 @@ from numpy.typing import ArrayLike
 from wavestack.drivers.errors import DeviceTimeout, ProtocolError
 from wavestack.drivers.plc.commands import CommandLedger, CommandLimits, CommandRefused
 from wavestack.drivers.plc.gate import (HeartbeatEchoStale, PlcNotReady, command_refusal, decode_self_check,
-                                       echo_lag_error, no_scan_since, not_ready)
+                                       no_scan_since, not_ready)
+from wavestack.drivers.plc.heartbeat import HostHeartbeat, new_token
 from wavestack.drivers.plc.job_control import JobControl
 from wavestack.drivers.plc.jobs import JobLedger, JobLimits
 from wavestack.drivers.plc.raw_access import RawAccess
@@ -66,7 +68,7 @@ _log = logging.getLogger(__name__)
 _WATCHDOG_EXCEPTION = 4
 
 
-class PolishingLink(JobControl, RawAccess):
+class PolishingLink(HostHeartbeat, JobControl, RawAccess):
     """Modbus/TCP link to the polishing-station PLC.
 
     Commands publish the measured terms for the machine's display; removal happens only through
@@ -117,6 +119,7 @@ class PolishingLink(JobControl, RawAccess):
         self._ledger = CommandLedger()
         self._jobs = JobLedger()
         self._job_limits = job_limits
+        self._token = new_token()
 
     # ----------------------------------------------------------------------------- public API
     @property
@@ -186,35 +189,6 @@ class PolishingLink(JobControl, RawAccess):
             self._self_check_passed = True
             _log.info("%s: self-check passed (%r with word order %s)", self._device, value, block.word_order)
             return value
-
-    def heartbeat(self, timeout_s: float) -> PlcStatus:
-        """Increment the heartbeat register, then read the status and check the PLC echoes it.
-
-        Call once per cycle, more often than the PLC's watchdog timeout.
-
-        Raises
-        ------
-        PlcRefused
-            Exception 4 when the watchdog has tripped (see :meth:`rearm`).
-        HeartbeatEchoStale
-            The echo trails the heartbeat by more than ``timing.heartbeat_echo_max_lag`` beats.
-        """
-        deadline = deadline_after(timeout_s)
-        with self._lock:
-            if self._monitor:
-                raise ProtocolError(self._device, "a monitor link writes no heartbeat (the station owns it)")
-            was_open = self._transport.ensure_connected(deadline)  # a new connection already beat once
-            if was_open or self._heartbeat_pending:
-                self._send_heartbeat(deadline)
-            status = self._read_status(deadline)
-            stale = self._echo_lag_error(status)
-            self._echo_stale = stale is not None
-            if stale is not None:
-                try:
-                    raise stale
-                finally:  # no local naming the error: it would be a cycle with this frame (module notes)
-                    del stale
-            return status
 
     def send_removal(self, command_id: int, removal_nm: ArrayLike, passes: int, timeout_s: float) -> CommandAck:
         """Send one removal command and wait for the PLC to acknowledge its id.
@@ -318,19 +292,6 @@ class PolishingLink(JobControl, RawAccess):
             assert block.word_order is not None
             return decode_outputs(registers, block.word_order)
 
-    def rearm(self, timeout_s: float) -> PlcStatus:
-        """Write 1 to the re-arm register, resume the heartbeat (not on a monitor link) and return the status."""
-        deadline = deadline_after(timeout_s)
-        block = self._map.rearm
-        with self._lock:
-            self._transport.ensure_connected(deadline)
-            self._ledger.invalidate()  # the watchdog zeroed the outputs: read them back before a command
-            self._write(block.start, [1], block.write_function or 6, deadline)
-            _log.warning("%s: watchdog re-armed by the host%s", self._device, " (monitor link)" if self._monitor else "")
-            if not self._monitor:
-                self._send_heartbeat(deadline)
-            return self._read_status(deadline)
-
     def close(self) -> None:
         """Close the connection; idempotent. A later call reconnects."""
         with self._lock:
@@ -345,10 +306,6 @@ class PolishingLink(JobControl, RawAccess):
         self.close()
 
     # ----------------------------------------------------------------------------- internals
-    def _echo_lag_error(self, status: PlcStatus) -> HeartbeatEchoStale | None:
-        return echo_lag_error(self._device, self._beat, status, self._timing.heartbeat_echo_max_lag,
-                              self._map.status.start + 2)
-
     def _gate(self, command_id: int, deadline: float) -> np.ndarray:
         """Read the status; refuse unless the PLC can take a command; settle the held command; return it."""
         status = self._read_status(deadline)
@@ -395,25 +352,6 @@ class PolishingLink(JobControl, RawAccess):
                     raise
                 _log.warning("%s: command %d, attempt %d failed (%s); resending the same id",
                              self._device, command_id, attempts, error.detail)
-
-    def _resume_heartbeat(self, deadline: float) -> None:
-        """First requests on a new connection: continue from the PLC's heartbeat register and beat."""
-        self._heartbeat_pending = True
-        if self._monitor:
-            return
-        block = self._map.heartbeat
-        try:
-            self._beat = self._transport.read(block.start, 1, block.read_function, deadline)[0]
-            self._send_heartbeat(deadline)
-        except PlcRefused as error:  # a tripped watchdog refuses everything but the re-arm
-            _log.warning("%s: heartbeat not resumed after connecting: %s", self._device, error.detail)
-
-    def _send_heartbeat(self, deadline: float) -> None:
-        block = self._map.heartbeat
-        beat = (self._beat + 1) & 0xFFFF
-        self._write(block.start, [beat], block.write_function or 6, deadline)
-        self._beat = beat
-        self._heartbeat_pending = False
 
     def _read_status(self, deadline: float) -> PlcStatus:
         try:

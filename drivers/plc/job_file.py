@@ -17,18 +17,28 @@ id) in the configured job folder is UTF-8 text in two parts:
    written with Python's shortest round-trip repr, so the reader gets the writer's float64 exactly;
 2. the **trailer**, one line after the body and a newline: ``wsjob-crc32 XXXXXXXX N`` with the
    CRC-32 (ISO-HDLC, as zlib and PKZIP compute it; 8 lowercase hex digits) of the body's ``N``
-   bytes. A reader that finds no trailer knows the file is truncated; one whose body does not match
-   knows it is corrupt. The same CRC-32 is announced over Modbus, so the machine also knows it
-   reads the file the host meant.
+   bytes, and with a job key ``wsjob-crc32 XXXXXXXX N hmac-sha256 H`` where ``H`` is the
+   HMAC-SHA256 (RFC 2104) of the body under the key, 64 lowercase hex digits. A reader that finds
+   no trailer knows the file is truncated; one whose body does not match knows it is corrupt. The
+   same CRC-32 is announced over Modbus, so the machine also knows it reads the file the host
+   meant. The CRC-32 catches accidents, not tampering: anyone who can write the job folder can
+   write a file with a matching CRC. A machine that holds the same key refuses a file without the
+   right HMAC (NOT_SIGNED): only a holder of the key can make a job it runs
+   (:func:`read_job_key` reads one from a file).
 
 Atomic: the body and trailer go to a temporary file in the same folder, are flushed and fsynced,
-then ``os.replace`` gives the file its name (and the folder is fsynced), so the machine never sees a
-half-written job under a job's name. An existing job file is never overwritten (ids are never
-reused).
+then a hard link gives the file its name in one step that fails when the name exists (and the
+folder is fsynced), so the machine never sees a half-written job under a job's name and a job file
+is never overwritten, not even one another writer puts there at the same moment (ids are never
+reused). On a file system without hard links the name is first claimed with an exclusive create
+(an empty file, which the machine would refuse as truncated) and then replaced by the job.
 """
 
 from __future__ import annotations
 
+import errno
+import hashlib
+import hmac
 import json
 import logging
 import math
@@ -48,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 from wavestack.drivers.plc.jobs import MAX_JOB_ID, JobRefused, JobSummary
 
 __all__ = ["JOB_FORMAT", "JOB_FORMAT_VERSION", "JobFile", "JobReceipt", "encode_job_file", "job_file_name",
-           "used_job_ids", "write_job_file"]
+           "read_job_key", "used_job_ids", "write_job_file"]
 
 _log = logging.getLogger(__name__)
 
@@ -194,8 +204,29 @@ class JobReceipt:
     summary: JobSummary
 
 
-def encode_job_file(job: JobFile) -> tuple[bytes, int]:
-    """The file's bytes (body, newline, trailer) and the body's CRC-32 (pure)."""
+def read_job_key(path: str | Path) -> bytes:
+    """The job key in a key file: hexadecimal text of at least 16 bytes (32 hex digits), whitespace around.
+
+    Make one with ``python3 -c "import secrets; print(secrets.token_hex(32))" > job.key``; the
+    machine's controller holds the same key.
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read, or does not hold such a key; the message names it.
+    """
+    try:
+        text = Path(path).read_text(encoding="ascii").strip()
+        key = bytes.fromhex(text)
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise ValueError(f"job key file {path}: expected hexadecimal text of at least 32 digits ({error})") from None
+    if len(key) < 16:
+        raise ValueError(f"job key file {path}: a key of {len(key)} bytes; expected at least 16 (32 hex digits)")
+    return key
+
+
+def encode_job_file(job: JobFile, key: bytes | None = None) -> tuple[bytes, int]:
+    """The file's bytes (body, newline, trailer; the HMAC too with a ``key``) and the body's CRC-32 (pure)."""
     header = {
         "format": JOB_FORMAT, "version": JOB_FORMAT_VERSION, "job_id": int(job.job_id), "created_utc": job.created_utc,
         "units": {"position": "mm", "dwell": "s", "feed": "mm/s"},
@@ -209,10 +240,11 @@ def encode_job_file(job: JobFile) -> tuple[bytes, int]:
     points = ",\n".join("  " + json.dumps(row, allow_nan=False) for row in rows)
     body = ("{\n" + "\n".join(lines) + '\n "points": [\n' + points + "\n ]\n}").encode("utf-8")
     crc = zlib.crc32(body) & 0xFFFFFFFF
-    return body + f"\n{_TRAILER} {crc:08x} {len(body)}\n".encode("ascii"), crc
+    signature = "" if key is None else f" hmac-sha256 {hmac.new(key, body, hashlib.sha256).hexdigest()}"
+    return body + f"\n{_TRAILER} {crc:08x} {len(body)}{signature}\n".encode("ascii"), crc
 
 
-def write_job_file(folder: Path, job: JobFile) -> JobReceipt:
+def write_job_file(folder: Path, job: JobFile, *, key: bytes | None = None) -> JobReceipt:
     """Write ``job`` into ``folder`` atomically; the receipt to announce.
 
     Parameters
@@ -221,6 +253,8 @@ def write_job_file(folder: Path, job: JobFile) -> JobReceipt:
         The job folder (must exist: a network share on a real station, a local folder in simulation).
     job
         The job.
+    key
+        The job key (:func:`read_job_key`): the trailer then carries the body's HMAC-SHA256.
 
     Returns
     -------
@@ -248,24 +282,39 @@ def write_job_file(folder: Path, job: JobFile) -> JobReceipt:
     if not folder.is_dir():
         raise OSError(f"job folder {folder} does not exist or is not a folder")
     path = folder / job_file_name(job.job_id)
-    if path.exists():
-        raise JobRefused(str(folder), f"refusing to overwrite {path.name}: job id {job.job_id} was used before")
-    data, crc = encode_job_file(job)
+    data, crc = encode_job_file(job, key)
     handle, temporary = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(handle, "wb") as stream:
             stream.write(data)
             stream.flush()
             os.fsync(stream.fileno())
-        os.replace(temporary, path)
-    except BaseException:
+        _name_without_overwrite(Path(temporary), path, job.job_id)
+    finally:
         Path(temporary).unlink(missing_ok=True)
-        raise
     _fsync_folder(folder)
     _log.info("job %d written to %s (%d points, %.3f s dwell, CRC-32 %08x)", job.job_id, path, job.point_count,
               job.total_dwell_s, crc)
     return JobReceipt(path=path, crc32=crc, point_count=job.point_count, total_dwell_s=job.total_dwell_s,
                       summary=job.summary())
+
+
+def _name_without_overwrite(temporary: Path, path: Path, job_id: int) -> None:
+    """Give the written file its job name in one step that never replaces an existing name (module notes)."""
+    refused = JobRefused(str(path.parent), f"refusing to overwrite {path.name}: job id {job_id} was used before")
+    try:
+        os.link(temporary, path)  # fails with EEXIST whatever is there: a file, a link, a dangling symlink
+        return
+    except FileExistsError:
+        raise refused from None
+    except OSError as error:
+        if error.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS):
+            raise
+    try:  # no hard links here: claim the name exclusively, then replace the empty claim with the job
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+    except FileExistsError:
+        raise refused from None
+    os.replace(temporary, path)
 
 
 def _fsync_folder(folder: Path) -> None:

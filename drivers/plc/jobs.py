@@ -4,7 +4,7 @@ A polishing program goes to the machine as a job file (:mod:`.job_file`); over M
 announces it in the job block (action LOAD: job id, CRC-32, point count, total dwell) and starts it
 (action START); the machine reports its state in the machine block:
 
-- ``state`` (:class:`MachineState`): IDLE, LOADED, RUNNING, DONE, ABORTED, FAULT;
+- ``state`` (:class:`MachineState`): IDLE, LOADED, RUNNING, DONE, ABORTED, FAULT, LOADING;
 - ``reason`` (:class:`JobReason`): why a load was refused (FAULT) or a run ended early (ABORTED);
 - ``job id``, ``points done`` and ``point count`` of the job the state belongs to.
 
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from wavestack.drivers.errors import LimitError
 from wavestack.drivers.plc.codec import WordOrder, decode_uint32
 
-__all__ = ["JOB_BLOCK_COUNT", "MACHINE_BLOCK_COUNT", "MAX_JOB_ID", "JobAction", "JobLedger", "JobLimits",
-           "JobReason", "JobRefused", "JobSummary", "MachineState", "MachineStatus", "decode_machine"]
+__all__ = ["JOB_BLOCK_COUNT", "MACHINE_BLOCK_COUNT", "MAX_JOB_ID", "SPENT_STATES", "JobAction", "JobLedger",
+           "JobLimits", "JobReason", "JobRefused", "JobSummary", "MachineState", "MachineStatus", "decode_machine"]
 
 #: Registers of the job block: action, job id, CRC-32 (2), point count (2), total dwell float32 (2).
 JOB_BLOCK_COUNT = 8
@@ -39,7 +39,7 @@ class JobRefused(LimitError):
 class JobAction(enum.IntEnum):
     """The job block's first register: what the write asks of the machine."""
 
-    LOAD = 1  #: read the job file ``job-NNNNN.wsjob``, check it against the announced values and the limits
+    LOAD = 1  #: read the job file ``job-NNNNN.wsjob`` (LOADING), check it against the announced values and limits
     START = 2  #: run the loaded job (its id must be the one loaded)
     ABORT = 3  #: stop the running job (ends ABORTED, reason HOST_ABORT, removal so far kept)
 
@@ -53,6 +53,7 @@ class MachineState(enum.IntEnum):
     DONE = 3  #: every point was polished
     ABORTED = 4  #: the run stopped early (reason says why); the part polished so far stays polished
     FAULT = 5  #: the last LOAD was refused (reason says why); the next LOAD may clear it
+    LOADING = 6  #: the machine reads and checks the announced job file (seconds for a large job)
 
 
 class JobReason(enum.IntEnum):
@@ -78,6 +79,7 @@ class JobReason(enum.IntEnum):
     PLC_RESTART = 17  #: the PLC restarted during the run
     HOST_ABORT = 18  #: the host asked for an abort
     MACHINE_FAULT = 19  #: the machine itself failed during the run (its log says how)
+    NOT_SIGNED = 20  #: the machine has a job key and the file's HMAC is missing or wrong
 
     @property
     def meaning(self) -> str:
@@ -106,6 +108,7 @@ _MEANINGS = {
     JobReason.PLC_RESTART: "PLC restart during the run",
     JobReason.HOST_ABORT: "aborted by the host",
     JobReason.MACHINE_FAULT: "the machine failed during the run (see its log)",
+    JobReason.NOT_SIGNED: "the job file carries no valid HMAC for the machine's job key",
 }
 
 
@@ -273,8 +276,19 @@ def _inside(span: tuple[float, float], travel: tuple[float, float]) -> bool:
     return travel[0] <= span[0] and span[1] <= travel[1]
 
 
+#: States in which the machine block's job id was loaded (or run) by the machine: that id is spent.
+SPENT_STATES = frozenset({MachineState.LOADED, MachineState.RUNNING, MachineState.DONE, MachineState.ABORTED})
+
+
 class JobLedger:
-    """The job ids the host has used: a new job always gets an id above every one seen, never a used one.
+    """The job ids the host has spent; a new job gets the next id after the host's own, never a spent one.
+
+    An id is spent when this host announced it (its job file exists), when a job file in the job
+    folder has it, or when the machine reports it loaded or run (LOADED, RUNNING, DONE, ABORTED), or
+    refuses it as used before (JOB_ID_USED, the machine's own log). An id the machine reports in
+    any other state (a load it refused, FAULT) is not spent by that report, and no report moves the
+    host's next id: only ids this host announced do. So no peer can make the host skip ahead, and a
+    refused load costs nothing but its own id.
 
     Ids are 1..65535 and never wrap: at one job per ten minutes the range lasts over a year; a
     station that reaches it is told so (a new machine log, or a new job folder, starts afresh).
@@ -282,49 +296,59 @@ class JobLedger:
     Examples
     --------
     >>> ledger = JobLedger()
-    >>> ledger.saw(41)            # the machine reports job 41
+    >>> ledger.saw(MachineStatus(MachineState.FAULT, JobReason.FILE_MISSING, 65535, 0, 0))  # refused: not spent
+    >>> ledger.saw(MachineStatus(MachineState.DONE, JobReason.NONE, 2, 10, 10))             # run: spent
     >>> ledger.next_id()
-    42
-    >>> ledger.use(42); ledger.next_id()
-    43
+    1
+    >>> ledger.use(1); ledger.next_id()   # 2 was run by the machine: skipped
+    3
     """
 
     def __init__(self) -> None:
         self._used: set[int] = set()
-        self._highest = 0
+        self._own_highest = 0
 
     @property
     def highest(self) -> int:
-        """The highest id used or seen (0: none)."""
-        return self._highest
+        """The highest id this host announced or found in its job folder (0: none)."""
+        return self._own_highest
 
     def used(self, job_id: int) -> bool:
-        """Whether ``job_id`` was used (announced) by this host, or is at or below an id the machine reported."""
-        return job_id in self._used or job_id <= self._highest  # below the highest: never handed out again
+        """Whether ``job_id`` is spent (see the class notes)."""
+        return job_id in self._used
 
-    def saw(self, job_id: int) -> None:
-        """The machine reports ``job_id`` (0: none): every id up to it counts as used."""
-        self._highest = max(self._highest, int(job_id))
+    def saw(self, status: MachineStatus) -> None:
+        """The machine block as read: its job id is spent when the machine loaded or ran it."""
+        if status.state in SPENT_STATES and status.job_id > 0:
+            self._used.add(int(status.job_id))
+
+    def refused(self, status: MachineStatus) -> None:
+        """A load refused: the id is spent when the machine's log has it (JOB_ID_USED)."""
+        if status.reason is JobReason.JOB_ID_USED and status.job_id > 0:
+            self._used.add(int(status.job_id))
 
     def note_used(self, job_ids: Iterable[int]) -> None:
-        """Ids used by an earlier session (e.g. the job files found in the job folder)."""
+        """Ids of the job files already in the job folder (this host's earlier sessions)."""
         for job_id in job_ids:
             self.use(job_id)
 
     def use(self, job_id: int) -> None:
-        """``job_id`` is being announced: it is spent, whatever the machine answers."""
+        """``job_id`` is being announced by this host: spent, whatever the machine answers."""
         self._used.add(int(job_id))
-        self._highest = max(self._highest, int(job_id))
+        self._own_highest = max(self._own_highest, int(job_id))
 
     def next_id(self) -> int:
-        """The next id: one above the highest used or seen.
+        """The next id: the first after this host's highest that is not spent.
 
         Raises
         ------
         JobRefused
-            Every id up to 65535 is spent.
+            No id up to 65535 is left.
         """
-        if self._highest >= MAX_JOB_ID:
+        candidate = self._own_highest + 1
+        while candidate in self._used:
+            candidate += 1
+        if candidate > MAX_JOB_ID:
             raise JobRefused("job ledger", f"every job id up to {MAX_JOB_ID} is spent; start a new machine log "
                              "and job folder")
-        return self._highest + 1
+        return candidate

@@ -2,7 +2,8 @@
 
 A mixin: reads of any register, writes only inside the heartbeat or re-arm register (the allow-list
 of :meth:`~wavestack.drivers.plc.register_map.RegisterMap.check_write`; the command and job blocks
-are written only by their verbs, behind the readiness gate and the limits).
+are written only by their verbs, behind the readiness gate and the limits, the owner block only by
+the link's claim). A monitor link writes the re-arm register only: the heartbeat is the station's.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ class RawAccess:
     _map: RegisterMap
     _device: str
     _transport: ModbusTransport
+    _monitor: bool
 
     if TYPE_CHECKING:
         def _write(self, address: int, values: list[int], function_code: int, deadline: float) -> None: ...
@@ -44,9 +46,14 @@ class RawAccess:
         if not values or not registers_fit(values):
             raise ValueError(f"{self._device}: values must be 1..123 integers 0..65535, got {values!r}")
         block = self._map.check_write(address, len(values), self._write_function_for(address))
-        if block.name in ("command", "job"):
+        if block.name in ("command", "job", "owner"):
             raise WriteRefused(self._device, f"refusing a raw write to register {address}: the {block.name} block "
-                               "is written only by send_removal or the job verbs (the readiness gate and the limits)")
+                               "is written only by send_removal, the job verbs or the link's claim (the readiness "
+                               "gate, the limits, the link's token)")
+        if self._monitor and block.name != "rearm":
+            raise WriteRefused(self._device, f"refusing a raw write to register {address}: a monitor link writes "
+                               f"the re-arm register only (register {self._map.rearm.start}); the heartbeat is the "
+                               "station's")
         deadline = deadline_after(timeout_s)
         with self._lock:
             self._transport.ensure_connected(deadline)

@@ -2,10 +2,10 @@
 
 Every address the driver touches is named here, as frozen values built from the configuration, so
 a register map is checked once (no overlaps, counts that fit one Modbus request, function codes that
-make sense) and the driver never writes a literal address. The host may write only three places:
-the heartbeat register, the re-arm register, the command block and the job block (each block whole,
-in one request), each with its configured function code; :meth:`RegisterMap.check_write` refuses
-anything else before a byte goes on the wire.
+make sense) and the driver never writes a literal address. The host may write only these places:
+the heartbeat register, the re-arm register, the command block, the job block and the owner block
+(each block whole, in one request), each with its configured function code;
+:meth:`RegisterMap.check_write` refuses anything else before a byte goes on the wire.
 
 Layout of the blocks (``n`` = number of removal terms, ``(count - 2) / 2``):
 
@@ -21,7 +21,12 @@ Layout of the blocks (``n`` = number of removal terms, ``(count - 2) / 2``):
 - job (8, optional, FC16 whole): uint16 action (1 load, 2 start, 3 abort), uint16 job id, uint32
   CRC-32 of the job file's body, uint32 point count, float32 total dwell s (see :mod:`.jobs`);
 - machine (7, optional, read-only): uint16 state, uint16 reason, uint16 job id, uint32 points done,
-  uint32 point count.
+  uint32 point count;
+- owner (4, optional, FC16 whole, reads as zeros): the host's 64-bit ownership token. The PLC takes
+  heartbeat, command and job writes from one connection only, the one that claimed it with its
+  token, until the watchdog trips; the same host reclaims it after a reconnect with the same
+  token; the re-arm register takes anyone's write (the operator's). Without this block the PLC
+  gives ownership to the first connection that beats.
 
 The command block keeps publishing the measured terms for the machine's display; removal happens
 only through jobs (job file + job block).
@@ -42,11 +47,15 @@ from wavestack.drivers.plc.codec import (WORD_ORDERS, WordOrder, encode_float32,
                                          round_to_float32)
 from wavestack.drivers.plc.jobs import JOB_BLOCK_COUNT, MACHINE_BLOCK_COUNT, MAX_JOB_ID, JobAction
 
+#: Registers of the owner block: a 64-bit token, four uint16.
+OWNER_COUNT = 4
+
 __all__ = [
     "COMMAND_HEADER_COUNT",
     "MAX_READ_COUNT",
     "MAX_WRITE_COUNT",
     "OUTPUT_HEADER_COUNT",
+    "OWNER_COUNT",
     "STATUS_COUNT",
     "RegisterBlock",
     "RegisterMap",
@@ -145,6 +154,8 @@ class RegisterMap:
         The blocks (see the module docstring for their layouts).
     job, machine
         The job block and the machine-state block, both or neither (None: a PLC without jobs).
+    owner
+        The owner block (None: the PLC gives ownership to the first connection that beats).
     """
 
     unit_id: int
@@ -157,6 +168,7 @@ class RegisterMap:
     output: RegisterBlock
     job: RegisterBlock | None = None
     machine: RegisterBlock | None = None
+    owner: RegisterBlock | None = None
 
     def __post_init__(self) -> None:
         if not 0 <= self.unit_id <= 255:
@@ -169,7 +181,7 @@ class RegisterMap:
             raise ValueError(f"self_check_value must lie within the float32 range (|x| <= 3.4e38) that the "
                              f"self-check block holds, got {self.self_check_value!r}") from None
         expected = {"self_check": 2, "heartbeat": 1, "rearm": 1, "status": STATUS_COUNT, "job": JOB_BLOCK_COUNT,
-                    "machine": MACHINE_BLOCK_COUNT}
+                    "machine": MACHINE_BLOCK_COUNT, "owner": OWNER_COUNT}
         if (self.job is None) != (self.machine is None):
             raise ValueError("the job block and the machine block come together: configure both or neither")
         for block in self.blocks():
@@ -190,8 +202,8 @@ class RegisterMap:
         if self.command.count > MAX_WRITE_COUNT:
             raise ValueError(f"command block: {self.command.count} registers exceed one FC16 write ({MAX_WRITE_COUNT})")
         for block, codes in ((self.heartbeat, _SINGLE_WRITE_FUNCTIONS), (self.rearm, _SINGLE_WRITE_FUNCTIONS),
-                             (self.command, _BLOCK_WRITE_FUNCTIONS), *(((self.job, _BLOCK_WRITE_FUNCTIONS),)
-                                                                      if self.job is not None else ())):
+                             (self.command, _BLOCK_WRITE_FUNCTIONS),
+                             *((block, _BLOCK_WRITE_FUNCTIONS) for block in (self.job, self.owner) if block is not None)):
             if block.write_function not in codes:
                 raise ValueError(f"{block.name} block: write function code must be one of {codes}, "
                                  f"got {block.write_function}")
@@ -225,6 +237,7 @@ class RegisterMap:
         output_word_order: WordOrder | None = None,
         job_register: int | None = None,
         machine_register: int | None = None,
+        owner_register: int | None = None,
     ) -> RegisterMap:
         """A register map from configuration values.
 
@@ -248,6 +261,8 @@ class RegisterMap:
             Starts of the 8-register job block (written with ``block_write_function``) and the
             7-register machine block (read-only); both or neither (None: no jobs). Their uint32 and
             float32 values use ``word_order``.
+        owner_register
+            Start of the 4-register owner block (written with ``block_write_function``), or None.
 
         Raises
         ------
@@ -290,7 +305,10 @@ class RegisterMap:
                 "machine", machine_register, MACHINE_BLOCK_COUNT,
                 "uint16 state, uint16 reason, uint16 job id, uint32 points done, uint32 point count",
                 read_function, None, word_order,
-                "state 0 idle, 1 loaded, 2 running, 3 done, 4 aborted, 5 fault; reason code (docs/instruments.md)"),
+                "state 0 idle, 1 loaded, 2 running, 3 done, 4 aborted, 5 fault, 6 loading; reason code (docs/instruments.md)"),
+            owner=None if owner_register is None else RegisterBlock(
+                "owner", owner_register, OWNER_COUNT, "uint16[4] token", read_function, block_write_function, None,
+                "the host's ownership token; written whole; reads as zeros"),
         )
 
     @property
@@ -306,7 +324,8 @@ class RegisterMap:
     def blocks(self) -> tuple[RegisterBlock, ...]:
         """Every block, in address-independent fixed order."""
         jobs = (self.job, self.machine) if self.job is not None and self.machine is not None else ()
-        return (self.self_check, self.heartbeat, self.rearm, self.status, self.command, self.output, *jobs)
+        owner = (self.owner,) if self.owner is not None else ()
+        return (self.self_check, self.heartbeat, self.rearm, self.status, self.command, self.output, *jobs, *owner)
 
     def check_write(self, address: int, count: int, function_code: int) -> RegisterBlock:
         """The writable block a write falls in, or refuse it.
@@ -321,7 +340,7 @@ class RegisterMap:
         Returns
         -------
         RegisterBlock
-            The heartbeat, re-arm, command or job block holding the whole write.
+            The heartbeat, re-arm, command, job or owner block holding the whole write.
 
         Raises
         ------

@@ -37,7 +37,7 @@ __all__ = ["LinkTiming", "ModbusTransport", "PlcRefused", "deadline_after"]
 _log = logging.getLogger(__name__)
 
 _EXCEPTION_MEANING = {
-    1: "illegal function",
+    1: "illegal function, or not for this connection: another host owns the PLC",
     2: "illegal data address (not in the PLC's map, or read-only)",
     3: "illegal data value (a parameter out of range)",
     4: "server device failure (watchdog tripped: re-arm; or e-stop; or no heartbeat seen yet)",

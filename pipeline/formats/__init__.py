@@ -7,6 +7,7 @@ from .datx import DatxMap, read_datx
 from .errors import InputError
 from .fourd import FourDMap, read_4d
 from .images import FRAME_SUFFIXES, read_frame, read_frame_set
+from .limits import check_allocation
 from .maps import load_map, load_mask
 from .measured import (
     MEASURED_MAP_SUFFIXES,
@@ -28,6 +29,7 @@ __all__ = [
     "MetroProHeader",
     "MetroProMap",
     "SUPPORTED_FILES",
+    "check_allocation",
     "load_map",
     "load_mask",
     "read_4d",

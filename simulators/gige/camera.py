@@ -4,8 +4,10 @@
 READREG, WRITEREG, READMEM, WRITEMEM, PACKETRESEND) from one thread and streams image blocks from
 another, paced at ``settings.link_rate_mbit_s``, to the address and port the host writes into
 stream channel 0. The control privilege (CCP) belongs to one host at a time and lapses after the
-heartbeat timeout without commands from it, which also stops a running acquisition. The last
-blocks sent are kept for PACKETRESEND. Faults are injected through ``camera.faults``.
+heartbeat timeout without commands from it, which also stops a running acquisition. Any host may
+read (a monitor); only the controlling host writes and asks for resends. The last blocks sent are
+kept for PACKETRESEND, and at most :data:`RESEND_QUEUE` requests wait (the oldest is dropped, as a
+lost request). Faults are injected through ``camera.faults``.
 """
 
 from __future__ import annotations
@@ -13,7 +15,6 @@ from __future__ import annotations
 import collections
 import ipaddress
 import logging
-import queue
 import random
 import socket
 import struct
@@ -34,6 +35,7 @@ from wavestack.simulators.u3v.stream_device import FrameScheduler, ImageFormat, 
 _log = logging.getLogger(__name__)
 TRUTH_HISTORY = 64
 RESEND_HISTORY = 8
+RESEND_QUEUE = 16
 _OVERSIZED = 9100
 _LOCKED_WHILE_ACQUIRING = frozenset({"Width", "Height", "PixelFormat", "TriggerMode"})
 
@@ -68,7 +70,7 @@ class SimulatedGigECamera:
         self._last_command = 0.0
         self._truths: OrderedDict[int, Any] = OrderedDict()
         self._history: OrderedDict[int, list[bytes]] = OrderedDict()
-        self._resends: queue.SimpleQueue[tuple[int, int, int]] = queue.SimpleQueue()
+        self._resends: collections.deque[tuple[int, int, int]] = collections.deque(maxlen=RESEND_QUEUE)
         self._random = random.Random(self.faults.loss_seed)
         self.counters = collections.Counter[str]()
         self._control = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -166,8 +168,11 @@ class SimulatedGigECamera:
         if code == p.DISCOVERY:
             return p.SUCCESS, self._discovery()
         if code == p.PACKETRESEND and len(body) == 12:
+            if sender != self._controller:
+                self.counters["resends_refused"] += 1
+                return p.ACCESS_DENIED, b""
             _, block, first, last = struct.unpack(">HHII", body)
-            self._resends.put((block, first, last))
+            self._resends.append((block, first, last))
             self._wake.notify_all()
             return p.SUCCESS, b""
         if code == p.READREG and body and len(body) % 4 == 0:
@@ -264,7 +269,7 @@ class SimulatedGigECamera:
             job = None
             with self._wake:
                 while self._running.is_set() and job is None:
-                    if not self._resends.empty():
+                    if self._resends:
                         break
                     now = self.device_time_ns()
                     frame = self._scheduler.take(now) if self._destination() else None
@@ -304,9 +309,11 @@ class SimulatedGigECamera:
         self._send(order, destination)
 
     def _send_resends(self) -> None:
-        while not self._resends.empty():
-            block, first, last = self._resends.get()
+        while True:
             with self._lock:
+                if not self._resends:
+                    return
+                block, first, last = self._resends.popleft()
                 packets = self._history.get(block, [])
                 destination = self._destination()
             wanted = packets[first:last + 1] if first < len(packets) else []

@@ -13,7 +13,7 @@ from typing import Final
 
 __all__ = ["GCS_ERRORS", "NO_ERROR", "PARAM_SYNTAX", "UNKNOWN_COMMAND", "COMMAND_TOO_LONG",
            "MOVE_WITHOUT_REF_OR_NO_SERVO", "POS_OUT_OF_LIMITS", "VEL_OUT_OF_LIMITS", "SET_PIVOT_NOT_POSSIBLE",
-           "STOP", "INVALID_AXIS_IDENTIFIER", "DOUBLE_AXIS", "PARAM_NR"]
+           "STOP", "INVALID_AXIS_IDENTIFIER", "PARAM_OUT_OF_RANGE", "DOUBLE_AXIS", "PARAM_NR"]
 
 NO_ERROR: Final = 0
 PARAM_SYNTAX: Final = 1
@@ -25,6 +25,7 @@ VEL_OUT_OF_LIMITS: Final = 8
 SET_PIVOT_NOT_POSSIBLE: Final = 9
 STOP: Final = 10
 INVALID_AXIS_IDENTIFIER: Final = 15
+PARAM_OUT_OF_RANGE: Final = 17
 DOUBLE_AXIS: Final = 22
 PARAM_NR: Final = 24
 
@@ -41,6 +42,7 @@ GCS_ERRORS: Final[dict[int, tuple[str, str]]] = {
     SET_PIVOT_NOT_POSSIBLE: ("PI_CNTR_SET_PIVOT_NOT_POSSIBLE", "Attempt to set pivot point while U,V and W not all 0"),
     STOP: ("PI_CNTR_STOP", "Controller was stopped by command"),
     INVALID_AXIS_IDENTIFIER: ("PI_CNTR_INVALID_AXIS_IDENTIFIER", "Invalid axis identifier"),
+    PARAM_OUT_OF_RANGE: ("PI_CNTR_PARAM_OUT_OF_RANGE", "Parameter out of range"),
     DOUBLE_AXIS: ("PI_CNTR_DOUBLE_AXIS", "Axis identifier specified more than once"),
     PARAM_NR: ("PI_CNTR_PARAM_NR", "Incorrect number of parameters"),
 }

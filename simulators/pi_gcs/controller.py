@@ -20,7 +20,8 @@ Written from PI's documents, not from wavestack's driver (see :mod:`.framing` fo
   (0xB0) until it ends, ready (0xB1) otherwise (``#7`` says nothing of motion: use ``#5``).
 * ``#5``: the moving axes as a hexadecimal bit mask, bit i = axis i (``0`` when all are still).
 * ``SPI {R|S|T value}`` / ``SPI?``: the pivot point, settable only while U, V and W are all 0
-  (else error 9, ``PI_CNTR_SET_PIVOT_NOT_POSSIBLE``); a stage without a pivot does not know SPI.
+  (else error 9, ``PI_CNTR_SET_PIVOT_NOT_POSSIBLE``) and within +-``pivot_limit_mm`` (else
+  error 17, ``PI_CNTR_PARAM_OUT_OF_RANGE``); a stage without a pivot does not know SPI.
 * ``VLS value`` / ``VLS?``: the system velocity; outside (0, max] error 8.
 * The command mnemonic is not case-sensitive (GCS 2.0 syntax); axis identifiers are matched as
   written. Unknown commands set error 2, wrong argument counts 24, malformed values 1.
@@ -340,6 +341,8 @@ class GcsController:
         if any(name not in _PIVOT_AXES for name, _ in pairs):
             raise _Refused(codes.INVALID_AXIS_IDENTIFIER)
         values = {name: _number(value) for name, value in pairs}
+        if any(abs(v) > self.settings.pivot_limit_mm for v in values.values()):
+            raise _Refused(codes.PARAM_OUT_OF_RANGE)
         position, target = self._segment.position(now), self._segment.target
         rotations = [i for i, a in enumerate(self._axes) if a in _ROTATIONS]
         if any(position[i] != 0.0 or target[i] != 0.0 for i in rotations):

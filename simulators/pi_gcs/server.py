@@ -5,7 +5,13 @@ socket pair: it reads whatever bytes arrive (several commands in one packet, one
 several packets: :class:`~wavestack.simulators.pi_gcs.framing.LineAssembler` does not care), feeds
 them to the :class:`~wavestack.simulators.pi_gcs.controller.GcsController` and writes the answers,
 honouring split replies (pieces released at their times) and dropped connections. All clients share
-the one controller (one error state, one platform), as on the real device.
+the one controller (one error state, one platform), as on the real device. Sockets never block the
+loop: a reply goes out as far as the peer's buffer takes it and the rest waits for the socket to be
+writable, so a client that never reads stalls no one; one whose unsent replies pass
+``MAX_PENDING_BYTES`` is disconnected. At most ``max_clients`` connections are served at once: a
+newcomer at the cap takes the place of the longest-quiet client that has sent nothing for
+``quiet_s``, else it is closed on arrival (counted in :attr:`HexapodSimulator.refused`), so silent
+peers cannot lock the station out and busy ones keep their places.
 
 :meth:`HexapodSimulator.stop` wakes the loop, which closes every socket before the thread ends; the
 caller joins the thread, so nothing outlives the ``with`` block.
@@ -29,14 +35,18 @@ from wavestack.simulators.pi_gcs.framing import LineAssembler
 from wavestack.simulators.pi_gcs.pose import SimPose
 from wavestack.simulators.pi_gcs.settings import HexapodSimSettings
 
-__all__ = ["DEFAULT_GCS_PORT", "HexapodSimulator"]
+__all__ = ["DEFAULT_GCS_PORT", "MAX_CLIENTS", "MAX_PENDING_BYTES", "QUIET_S", "HexapodSimulator"]
 
 _log = logging.getLogger(__name__)
 
 #: PI's TCP port for GCS on its controllers.
 DEFAULT_GCS_PORT = 50000
 _IDLE_S = 0.1  # longest sleep of the loop when nothing is due
-_SEND_TIMEOUT_S = 2.0  # a host that stops reading cannot hang the loop for longer
+#: Unsent reply bytes a client may leave waiting before it is disconnected (a GCS reply is a few
+#: hundred bytes: a client this far behind does not read).
+MAX_PENDING_BYTES = 1 << 16
+#: Connections served at once, and how long a client must have been quiet to make room for a newcomer.
+MAX_CLIENTS, QUIET_S = 8, 30.0
 
 
 @dataclass
@@ -46,6 +56,9 @@ class _Client:
     outbox: deque[tuple[float, bytes]] = field(default_factory=deque)  # (monotonic due time, chunk)
     close_when_sent: bool = False
     last_due: float = 0.0
+    blocked: bool = False  # the socket's buffer is full: wait until it is writable
+    pending: int = 0  # bytes in the outbox
+    last_heard: float = field(default_factory=time.monotonic)  # when it last sent a byte
 
 
 class HexapodSimulator:
@@ -59,6 +72,8 @@ class HexapodSimulator:
         Where to listen; port 0 picks a free port (see :attr:`port`).
     clock
         Simulated-time clock, s (tests pass one they advance by hand).
+    max_clients, quiet_s
+        Connections served at once; how long one must have sent nothing to make room (module notes).
 
     Attributes
     ----------
@@ -78,7 +93,10 @@ class HexapodSimulator:
     """
 
     def __init__(self, settings: HexapodSimSettings | None = None, *, host: str = "127.0.0.1", port: int = 0,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, max_clients: int = MAX_CLIENTS,
+                 quiet_s: float = QUIET_S) -> None:
+        self._max_clients, self._quiet_s = max_clients, quiet_s
+        self.refused = 0
         self.controller = GcsController(settings or HexapodSimSettings(), clock=clock)
         self.faults: GcsSimFaults = self.controller.faults
         self._host, self._port = host, port
@@ -173,13 +191,16 @@ class HexapodSimulator:
         selector.register(wake, selectors.EVENT_READ, "wake")
         try:
             while not self._stopping.is_set():
-                for key, _ in selector.select(self._timeout()):
+                for key, events in selector.select(self._timeout()):
                     if key.data == "accept":
                         self._accept(selector, listener)
                     elif key.data == "wake":
                         wake.recv(4096)
                     else:
-                        self._read(selector, key.data)
+                        if events & selectors.EVENT_WRITE:
+                            key.data.blocked = False
+                        if events & selectors.EVENT_READ:
+                            self._read(selector, key.data)
                 if self._drop_all.is_set():
                     self._drop_all.clear()
                     for client in self._snapshot():
@@ -200,7 +221,7 @@ class HexapodSimulator:
 
     def _timeout(self) -> float:
         now = time.monotonic()
-        due = [c.outbox[0][0] for c in self._snapshot() if c.outbox]
+        due = [c.outbox[0][0] for c in self._snapshot() if c.outbox and not c.blocked]
         return max(0.0, min([_IDLE_S, *(d - now for d in due)]))
 
     def _accept(self, selector: selectors.BaseSelector, listener: socket.socket) -> None:
@@ -208,30 +229,55 @@ class HexapodSimulator:
             sock, _ = listener.accept()
         except (BlockingIOError, InterruptedError):
             return
-        sock.settimeout(_SEND_TIMEOUT_S)
+        sock.setblocking(False)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         client = _Client(sock)
         with self._clients_lock:
             self._clients[sock.fileno()] = client
             self.connections += 1
         selector.register(sock, selectors.EVENT_READ, client)
+        self._admit(selector, client)
+
+    def _admit(self, selector: selectors.BaseSelector, newcomer: _Client) -> None:
+        """Keep ``newcomer`` within the cap, making room from a quiet client, or close it (module notes)."""
+        others = [c for c in self._snapshot() if c is not newcomer]
+        if len(others) < self._max_clients:
+            return
+        now = time.monotonic()
+        quiet = [c for c in others if now - c.last_heard >= self._quiet_s]
+        if quiet:
+            oldest = min(quiet, key=lambda c: c.last_heard)
+            _log.warning("GCS simulator: %d clients; one quiet for %.0f s closed for a new one", len(others),
+                         now - oldest.last_heard)
+            self._close(selector, oldest)
+            return
+        _log.warning("GCS simulator: %d clients, none quiet: a new connection refused", len(others))
+        self.refused += 1
+        self._close(selector, newcomer)
 
     def _read(self, selector: selectors.BaseSelector, client: _Client) -> None:
         try:
             data = client.sock.recv(4096)
+        except (BlockingIOError, InterruptedError):
+            return
         except OSError:
             data = b""
         if not data:
             self._close(selector, client)
             return
-        now = time.monotonic()
+        now = client.last_heard = time.monotonic()
         for event in client.assembler.feed(data):
             delivery = self.controller.handle(event)
             due = max(now, client.last_due)
             for delay_s, chunk in delivery.pieces:
                 due += delay_s
                 client.outbox.append((due, chunk))
+                client.pending += len(chunk)
             client.last_due = due
+            if client.pending > MAX_PENDING_BYTES:
+                _log.warning("GCS simulator: a client left %d reply bytes unread; disconnected", client.pending)
+                self._close(selector, client)
+                return
             if delivery.close:
                 client.close_when_sent = True
                 break  # the connection is gone: nothing after this command is read
@@ -240,11 +286,23 @@ class HexapodSimulator:
         now = time.monotonic()
         for client in self._snapshot():
             try:
-                while client.outbox and client.outbox[0][0] <= now:
-                    client.sock.sendall(client.outbox.popleft()[1])
+                while not client.blocked and client.outbox and client.outbox[0][0] <= now:
+                    due, chunk = client.outbox[0]
+                    sent = client.sock.send(chunk)
+                    client.pending -= sent
+                    if sent < len(chunk):  # the peer's buffer is full: the rest when it is writable
+                        client.outbox[0] = (due, chunk[sent:])
+                        client.blocked = True
+                    else:
+                        client.outbox.popleft()
+            except BlockingIOError:
+                client.blocked = True
             except OSError:
                 self._close(selector, client)
                 continue
+            events = selectors.EVENT_READ | (selectors.EVENT_WRITE if client.blocked else 0)
+            if selector.get_key(client.sock).events != events:
+                selector.modify(client.sock, events, client)
             if client.close_when_sent and not client.outbox:
                 self._close(selector, client)
 

@@ -39,6 +39,8 @@ class HexapodSimSettings:
     pivot
         Pivot point (R, S, T), mm, or None for a stage without rotations (``SPI`` is then an
         unknown command).
+    pivot_limit_mm
+        Largest |R|, |S|, |T| the controller takes, mm (``SPI`` beyond it: error 17).
     initial_position
         Power-on positions, one per axis (None: all zero); must lie within the limits.
     idn
@@ -68,6 +70,7 @@ class HexapodSimSettings:
     velocity: float = 2.0
     max_velocity: float = 20.0
     pivot: tuple[float, float, float] | None = (0.0, 0.0, 0.0)
+    pivot_limit_mm: float = 1000.0
     initial_position: tuple[float, ...] | None = None
     idn: str = _DEFAULT_IDN
     referenced: bool = True
@@ -93,8 +96,12 @@ class HexapodSimSettings:
         if not 0.0 < self.max_velocity < math.inf or not 0.0 < self.velocity <= self.max_velocity:
             raise ValueError(f"velocity: expected 0 < velocity <= max_velocity ({self.max_velocity}), "
                              f"got {self.velocity}")
-        if self.pivot is not None and (len(self.pivot) != 3 or not all(math.isfinite(p) for p in self.pivot)):
-            raise ValueError(f"pivot: expected 3 finite coordinates (R, S, T) or None, got {self.pivot}")
+        if not 0.0 < self.pivot_limit_mm < math.inf:
+            raise ValueError(f"pivot_limit_mm: expected a finite value > 0, got {self.pivot_limit_mm}")
+        if self.pivot is not None and (len(self.pivot) != 3
+                                       or not all(abs(p) <= self.pivot_limit_mm for p in self.pivot)):
+            raise ValueError(f"pivot: expected 3 coordinates (R, S, T) within +-{self.pivot_limit_mm:g} mm, or None, "
+                             f"got {self.pivot}")
         if not 0.0 <= self.reference_time_s < math.inf:
             raise ValueError(f"reference_time_s: expected >= 0, got {self.reference_time_s}")
         if any(ch in self.idn for ch in "\r\n"):

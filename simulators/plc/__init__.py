@@ -15,12 +15,13 @@ from __future__ import annotations
 
 from wavestack.simulators.plc.access import check_request, served_functions
 from wavestack.simulators.plc.faults import SimFaults
-from wavestack.simulators.plc.job_file import JobFileRefused, MachineJob, read_job_file
+from wavestack.simulators.plc.job_file import JobFileRefused, MachineJob, read_job_file, read_key_file
 from wavestack.simulators.plc.job_state import JobEvent, JobState, StopReason, next_state
 from wavestack.simulators.plc.machine import MachineSimSettings, MachineSnapshot, PolishingMachine, RemovalTarget
 from wavestack.simulators.plc.machine_tif import GaussianTool
 from wavestack.simulators.plc.polishing import PolishingPass, PolishingStation, RemovalCommand
-from wavestack.simulators.plc.program import PlcSimLayout, PolishingPlcProgram, SimOutputs
+from wavestack.simulators.plc.layout import PlcSimLayout
+from wavestack.simulators.plc.program import PolishingPlcProgram, SimOutputs
 from wavestack.simulators.plc.server import PlcSimulator, RequestRecord
 from wavestack.simulators.plc.watchdog import HeartbeatWatchdog, WatchdogState
 
@@ -49,5 +50,6 @@ __all__ = [
     "check_request",
     "next_state",
     "read_job_file",
+    "read_key_file",
     "served_functions",
 ]

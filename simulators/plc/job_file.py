@@ -2,12 +2,15 @@
 
 Re-implemented from the job-file description in the README (the host's writer lives in the driver,
 which a simulator never imports): a UTF-8 JSON body, a newline, and a trailer line
-``wsjob-crc32 XXXXXXXX N`` holding the CRC-32 (zlib's) of the body's ``N`` bytes. The reader
-checks, in this order, and refuses with the first reason that applies:
+``wsjob-crc32 XXXXXXXX N`` holding the CRC-32 (zlib's) of the body's ``N`` bytes, followed by
+`` hmac-sha256 H`` (the body's HMAC-SHA256 under the job key, 64 hex digits) when the host has a
+key. The reader checks, in this order, and refuses with the first reason that applies:
 
-1. the file exists and is not larger than the machine takes (FILE_MISSING, TOO_MANY_POINTS);
+1. the file exists, is a regular file (a FIFO or a device is never waited on or read), and is not
+   larger than the machine takes (FILE_MISSING, TOO_MANY_POINTS);
 2. the trailer is there and the body is as long as it says (FILE_TRUNCATED);
-3. the body's CRC-32 equals the trailer's (FILE_CORRUPT);
+3. the body's CRC-32 equals the trailer's (FILE_CORRUPT); with a machine key, the trailer's HMAC
+   is the body's under that key (NOT_SIGNED: missing or wrong);
 4. the body is a JSON object of format ``wavestack-polishing-job`` version 1 (FILE_CORRUPT,
    UNSUPPORTED_FORMAT) with an integer ``job_id``, ``point_count``, a number ``total_dwell_s``, the
    columns ``x_mm y_mm dwell_s feed_mm_s`` and one row of four finite numbers per point
@@ -18,9 +21,13 @@ It never raises anything but :class:`JobFileRefused`.
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import json
 import math
+import os
 import re
+import stat
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,11 +37,11 @@ from numpy.typing import NDArray
 
 from wavestack.simulators.plc.job_state import StopReason
 
-__all__ = ["JobFileRefused", "MachineJob", "read_job_file"]
+__all__ = ["JobFileRefused", "MachineJob", "read_job_file", "read_key_file"]
 
 _FORMAT, _VERSION = "wavestack-polishing-job", 1
 _COLUMNS = ["x_mm", "y_mm", "dwell_s", "feed_mm_s"]
-_TRAILER = re.compile(rb"\nwsjob-crc32 ([0-9a-f]{8}) (\d{1,12})\n\Z")
+_TRAILER = re.compile(rb"\nwsjob-crc32 ([0-9a-f]{8}) (\d{1,12})(?: hmac-sha256 ([0-9a-f]{64}))?\n\Z")
 
 
 class JobFileRefused(Exception):
@@ -44,6 +51,9 @@ class JobFileRefused(Exception):
         super().__init__(f"{reason.name}: {message}")
         self.reason = reason
         self.message = message
+
+    def __reduce__(self) -> tuple[type[JobFileRefused], tuple[StopReason, str]]:
+        return JobFileRefused, (self.reason, self.message)  # it crosses from the machine's reading process
 
 
 @dataclass(frozen=True)
@@ -64,7 +74,7 @@ class MachineJob:
         return int(self.dwell_s.size)
 
 
-def read_job_file(path: Path, max_bytes: int) -> MachineJob:
+def read_job_file(path: Path, max_bytes: int, key: bytes | None = None) -> MachineJob:
     """Read and check one job file.
 
     Parameters
@@ -73,6 +83,8 @@ def read_job_file(path: Path, max_bytes: int) -> MachineJob:
         The file (``job-NNNNN.wsjob`` in the machine's job folder).
     max_bytes
         The largest file the machine reads.
+    key
+        The machine's job key: only a file whose trailer carries the body's HMAC under it is read.
 
     Raises
     ------
@@ -92,6 +104,11 @@ def read_job_file(path: Path, max_bytes: int) -> MachineJob:
     if crc != int(match.group(1), 16):
         raise JobFileRefused(StopReason.FILE_CORRUPT, f"{path.name}: body CRC-32 {crc:08x}, trailer says "
                              f"{match.group(1).decode()}")
+    if key is not None:
+        expected = hmac.new(key, body, hashlib.sha256).hexdigest().encode("ascii")
+        if match.group(3) is None or not hmac.compare_digest(expected, match.group(3)):
+            raise JobFileRefused(StopReason.NOT_SIGNED, f"{path.name}: the trailer carries "
+                                 f"{'no' if match.group(3) is None else 'a wrong'} HMAC-SHA256 for the machine's key")
     try:
         document = json.loads(body.decode("utf-8"), parse_constant=_no_constant)
     except (UnicodeDecodeError, ValueError, RecursionError) as error:
@@ -100,12 +117,16 @@ def read_job_file(path: Path, max_bytes: int) -> MachineJob:
 
 
 def _read_bytes(path: Path, max_bytes: int) -> bytes:
-    try:
-        size = path.stat().st_size
-        if size > max_bytes:
-            raise JobFileRefused(StopReason.TOO_MANY_POINTS, f"{path.name}: {size} bytes, the machine reads at "
-                                 f"most {max_bytes}")
-        with open(path, "rb") as stream:
+    try:  # O_NONBLOCK: opening a FIFO returns at once (no writer needed), and fstat says what it is
+        descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+        with open(descriptor, "rb", closefd=True) as stream:
+            info = os.fstat(stream.fileno())
+            if not stat.S_ISREG(info.st_mode):
+                raise JobFileRefused(StopReason.FILE_MISSING, f"{path.name}: not a regular file (a FIFO, device "
+                                     "or folder is never read as a job)")
+            if info.st_size > max_bytes:
+                raise JobFileRefused(StopReason.TOO_MANY_POINTS, f"{path.name}: {info.st_size} bytes, the machine "
+                                     f"reads at most {max_bytes}")
             return stream.read(max_bytes + 1)
     except FileNotFoundError:
         raise JobFileRefused(StopReason.FILE_MISSING, f"no file {path.name} in {path.parent}") from None
@@ -170,3 +191,20 @@ def _parse(name: str, document: object, crc: int) -> MachineJob:
     table.setflags(write=False)
     return MachineJob(job_id=job_id, crc32=crc, total_dwell_s=float(total), x_mm=table[:, 0], y_mm=table[:, 1],
                       dwell_s=table[:, 2], feed_mm_s=table[:, 3])
+
+
+def read_key_file(path: Path) -> bytes:
+    """The machine's job key from a key file: hexadecimal text (at least 32 digits), whitespace around.
+
+    Raises
+    ------
+    ValueError
+        Unreadable, or not such a key.
+    """
+    try:
+        key = bytes.fromhex(Path(path).read_text(encoding="ascii").strip())
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise ValueError(f"machine job key {path}: expected hexadecimal text ({error})") from None
+    if len(key) < 16:
+        raise ValueError(f"machine job key {path}: {len(key)} bytes; expected at least 16")
+    return key

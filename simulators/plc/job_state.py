@@ -6,16 +6,18 @@ state register holds a :class:`JobState`, its reason register a :class:`StopReas
 ============  ==========================================================================
 event         effect
 ============  ==========================================================================
-LOAD_OK       IDLE, LOADED, DONE, ABORTED, FAULT -> LOADED (a loaded job replaced is spent)
-LOAD_REFUSED  IDLE, LOADED, DONE, ABORTED, FAULT -> FAULT (with the reason)
+LOAD          IDLE, LOADED, DONE, ABORTED, FAULT -> LOADING (the file is read and checked
+              in the background; a loaded job replaced is spent)
+LOAD_OK       LOADING -> LOADED
+LOAD_REFUSED  LOADING -> FAULT (with the reason)
 START         LOADED -> RUNNING
 FINISH        RUNNING -> DONE
-STOP          RUNNING, LOADED -> ABORTED (e-stop, watchdog, restart, host abort)
+STOP          RUNNING, LOADED, LOADING -> ABORTED (e-stop, watchdog, restart, host abort)
 ============  ==========================================================================
 
-Anything else is not a transition (:func:`next_state` returns None): a load while running, a start
-of anything but a loaded job, a finish or stop of a job that is not running. The machine answers
-those requests with a Modbus exception and keeps its state.
+Anything else is not a transition (:func:`next_state` returns None): a load while running or
+loading, a start of anything but a loaded job, a finish or stop of a job that is not running. The
+machine answers those requests with a Modbus exception and keeps its state.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ class JobState(enum.IntEnum):
     DONE = 3
     ABORTED = 4
     FAULT = 5
+    LOADING = 6
 
 
 class StopReason(enum.IntEnum):
@@ -59,11 +62,13 @@ class StopReason(enum.IntEnum):
     PLC_RESTART = 17
     HOST_ABORT = 18
     MACHINE_FAULT = 19
+    NOT_SIGNED = 20
 
 
 class JobEvent(enum.Enum):
     """What happens to a job."""
 
+    LOAD = "load announced"
     LOAD_OK = "load accepted"
     LOAD_REFUSED = "load refused"
     START = "start"
@@ -73,12 +78,14 @@ class JobEvent(enum.Enum):
 
 _NOT_RUNNING = (JobState.IDLE, JobState.LOADED, JobState.DONE, JobState.ABORTED, JobState.FAULT)
 _TABLE: dict[tuple[JobState, JobEvent], JobState] = {
-    **{(state, JobEvent.LOAD_OK): JobState.LOADED for state in _NOT_RUNNING},
-    **{(state, JobEvent.LOAD_REFUSED): JobState.FAULT for state in _NOT_RUNNING},
+    **{(state, JobEvent.LOAD): JobState.LOADING for state in _NOT_RUNNING},
+    (JobState.LOADING, JobEvent.LOAD_OK): JobState.LOADED,
+    (JobState.LOADING, JobEvent.LOAD_REFUSED): JobState.FAULT,
     (JobState.LOADED, JobEvent.START): JobState.RUNNING,
     (JobState.RUNNING, JobEvent.FINISH): JobState.DONE,
     (JobState.RUNNING, JobEvent.STOP): JobState.ABORTED,
     (JobState.LOADED, JobEvent.STOP): JobState.ABORTED,
+    (JobState.LOADING, JobEvent.STOP): JobState.ABORTED,
 }
 
 
@@ -89,7 +96,7 @@ def next_state(state: JobState, event: JobEvent) -> JobState | None:
     --------
     >>> next_state(JobState.LOADED, JobEvent.START)
     <JobState.RUNNING: 2>
-    >>> next_state(JobState.RUNNING, JobEvent.LOAD_OK) is None   # busy: a running job is never replaced
+    >>> next_state(JobState.RUNNING, JobEvent.LOAD) is None   # busy: a running job is never replaced
     True
     """
     return _TABLE.get((state, event))

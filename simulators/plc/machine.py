@@ -2,11 +2,17 @@
 
 The PLC program hands it the job block's actions (:mod:`.program`); the machine:
 
-- on LOAD reads ``job-NNNNN.wsjob`` from its job folder with its own reader (:mod:`.job_file`),
-  and checks the file's CRC-32 against the announced one, the job id, point count and total dwell
-  against the announced values, then its own limits (points, total dwell, per-point dwell, feed,
-  travel); any failure puts it in FAULT with the reason code. A job id it loaded before is refused
-  (JOB_ID_USED): it never runs an id twice. A LOAD identical to the loaded job is a retry: no-op.
+- on LOAD goes LOADING at once and reads ``job-NNNNN.wsjob`` from its job folder on a loader
+  thread, never on the thread that serves the PLC (a 500,000-point file takes seconds to check:
+  the PLC keeps answering, the watchdog keeps counting). A file above :data:`IN_THREAD_BYTES` is
+  parsed in a child process: the JSON parser holds the interpreter lock for the whole parse (1.7 s
+  for 300,000 points on the loaded 2-core machine), which would starve the PLC's thread just the
+  same. Its own reader (:mod:`.job_file`, regular files only, never waiting on a FIFO) and its checks of the file's CRC-32 against the announced
+  one, the job id, point count and total dwell against the announced values, then its own limits
+  (points, total dwell, per-point dwell, feed, travel); any failure puts it in FAULT with the
+  reason code, success in LOADED. A job id it loaded before is refused (JOB_ID_USED): it never runs
+  an id twice. A LOAD identical to the loaded (or loading) job is a retry: no-op; another LOAD
+  while loading is busy; an abort while loading ends ABORTED and the check's outcome is dropped.
 - on START runs the job in a thread, in simulated time (``time_scale`` simulated seconds per real
   second): for each point the travel at the file's feed, then the dwell, in slices, so an e-stop,
   a watchdog trip, a PLC restart or the host's abort stops it within one slice. Removal is
@@ -27,6 +33,7 @@ import logging
 import math
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +42,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.simulators.plc.job_file import JobFileRefused, MachineJob, read_job_file
+from wavestack.simulators.plc.job_file import JobFileRefused, MachineJob
+from wavestack.simulators.plc.job_load import check_job, read_announced_job
 from wavestack.simulators.plc.job_state import JobEvent, JobState, StopReason, next_state
 from wavestack.simulators.plc.machine_tif import GaussianTool
 
@@ -43,7 +51,10 @@ __all__ = ["MachineSimSettings", "MachineSnapshot", "PolishingMachine", "Removal
 
 _log = logging.getLogger(__name__)
 
+#: Jobs whose executed dwell the machine keeps for tests (the newest; a long run must not grow without bound).
+EXECUTED_HISTORY = 64
 _SLICE_REAL_S = 0.01  # longest real time between two interlock checks within a dwell
+
 _BYTES_PER_POINT = 120  # a generous bound on one point's line in the job file
 
 
@@ -83,6 +94,8 @@ class MachineSimSettings:
         The machine's own limits.
     flush_s
         Real time between two chunks applied to the target (> 0).
+    job_key
+        The machine's job key: it reads only job files whose HMAC-SHA256 matches (None: any).
     """
 
     job_folder: Path
@@ -101,6 +114,7 @@ class MachineSimSettings:
     travel_x_mm: tuple[float, float] = (-100.0, 100.0)
     travel_y_mm: tuple[float, float] = (-100.0, 100.0)
     flush_s: float = 0.05
+    job_key: bytes | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "job_folder", Path(self.job_folder))
@@ -172,12 +186,14 @@ class PolishingMachine:
         self._announced: tuple[int, int, int, float] | None = None
         self._run: _Run | None = None
         self._used: set[int] = set()
-        self._executed: dict[int, NDArray[np.float64]] = {}
+        self._executed: OrderedDict[int, NDArray[np.float64]] = OrderedDict()  # the newest EXECUTED_HISTORY jobs
         self._thread: threading.Thread | None = None
         self._halt = threading.Event()
         self._halt_reason = StopReason.NONE
         self._interlock: Callable[[], StopReason | None] = lambda: None
         self._refusal = ""
+        self._loader: threading.Thread | None = None
+        self._load_number = 0  # which load the loader thread's outcome belongs to
 
     # ----------------------------------------------------------------------------- ground truth
     def snapshot(self) -> MachineSnapshot:
@@ -200,16 +216,20 @@ class PolishingMachine:
             return self._refusal
 
     def executed_dwell_s(self, job_id: int) -> NDArray[np.float64]:
-        """Dwell actually executed per point of a run job, s, shape (K,) (zeros where it never got)."""
+        """Dwell actually executed per point of a run job, s, shape (K,) (zeros where it never got).
+
+        Kept for the newest :data:`EXECUTED_HISTORY` jobs run; KeyError for any other id.
+        """
         with self._lock:
             return self._executed[job_id].copy()
 
     def wait_idle(self, timeout_s: float) -> bool:
-        """Wait until no job thread runs; True if none does."""
-        thread = self._thread
-        if thread is not None:
-            thread.join(timeout_s)
-        return thread is None or not thread.is_alive()
+        """Wait until no job or loader thread runs; True if none does."""
+        deadline = time.monotonic() + timeout_s
+        for thread in (self._thread, self._loader):
+            if thread is not None:
+                thread.join(max(0.0, deadline - time.monotonic()))
+        return not any(t is not None and t.is_alive() for t in (self._thread, self._loader))
 
     # ----------------------------------------------------------------------------- PLC requests
     def attach_interlock(self, interlock: Callable[[], StopReason | None]) -> None:
@@ -217,30 +237,58 @@ class PolishingMachine:
         self._interlock = interlock
 
     def load(self, job_id: int, crc32: int, point_count: int, total_dwell_s: float) -> bool:
-        """Action LOAD; False when refused outright (busy running), else the state tells the outcome."""
+        """Action LOAD; False when refused outright (busy running or loading another), else the state tells.
+
+        Returns at once: the machine is LOADING until its loader thread has read and checked the file.
+        """
         announced = (job_id, crc32, point_count, total_dwell_s)
         with self._lock:
-            if self._state is JobState.RUNNING:
+            if self._state in (JobState.LOADED, JobState.LOADING) and self._announced == announced:
+                return True  # a retry of the load that succeeded or is under way
+            if self._state in (JobState.RUNNING, JobState.LOADING):
                 return False
-            if self._state is JobState.LOADED and self._announced == announced:
-                return True  # a retry of the load that succeeded
             self._announced, self._job_id, self._run = announced, job_id, None
-            try:
-                if job_id in self._used:
-                    raise JobFileRefused(StopReason.JOB_ID_USED, f"job id {job_id} was loaded before")
-                job = read_job_file(self.settings.job_folder / f"job-{job_id:05d}.wsjob",
-                                    self.settings.max_file_bytes)
-                self._check(job, announced)
-            except JobFileRefused as refusal:
-                self._enter(JobEvent.LOAD_REFUSED, refusal.reason)
-                self._refusal = refusal.message
-                _log.warning("machine: job %d refused: %s", job_id, refusal)
+            self._enter(JobEvent.LOAD, StopReason.NONE)
+            self._load_number += 1
+            if job_id in self._used:
+                self._finish_load(self._load_number, JobFileRefused(StopReason.JOB_ID_USED,
+                                                                    f"job id {job_id} was loaded before"))
                 return True
-            self._used.add(job_id)
-            self._run = _Run(job, np.zeros(job.point_count))
-            self._enter(JobEvent.LOAD_OK, StopReason.NONE)
-            _log.info("machine: job %d loaded (%d points, %.3f s dwell)", job_id, job.point_count, job.total_dwell_s)
-            return True
+            self._loader = threading.Thread(target=self._load, args=(self._load_number, announced),
+                                            name=f"job-loader-{job_id}", daemon=True)
+            self._loader.start()
+        return True
+
+    def _load(self, number: int, announced: tuple[int, int, int, float]) -> None:
+        """The loader thread: read and check the job file, then settle the load (unless it was dropped)."""
+        job_id = announced[0]
+        try:
+            job = read_announced_job(self.settings.job_folder / f"job-{job_id:05d}.wsjob",
+                                     self.settings.max_file_bytes, self.settings.job_key)
+            check_job(job, announced, self.settings)
+            outcome: MachineJob | JobFileRefused = job
+        except JobFileRefused as refusal:
+            outcome = refusal
+        except Exception as error:  # noqa: BLE001 - a bug in the checks must not leave the machine LOADING
+            _log.exception("machine: checking job %d failed", job_id)
+            outcome = JobFileRefused(StopReason.FILE_CORRUPT, f"job {job_id}: the check failed ({error})")
+        with self._lock:
+            self._finish_load(number, outcome)
+
+    def _finish_load(self, number: int, outcome: MachineJob | JobFileRefused) -> None:
+        """LOADED or FAULT for load ``number``; nothing when it is no longer the one loading (lock held)."""
+        if number != self._load_number or self._state is not JobState.LOADING:
+            return  # aborted, or superseded, while the file was read
+        if isinstance(outcome, JobFileRefused):
+            self._enter(JobEvent.LOAD_REFUSED, outcome.reason)
+            self._refusal = outcome.message
+            _log.warning("machine: job %d refused: %s", self._job_id, outcome)
+            return
+        self._used.add(outcome.job_id)
+        self._run = _Run(outcome, np.zeros(outcome.point_count))
+        self._enter(JobEvent.LOAD_OK, StopReason.NONE)
+        _log.info("machine: job %d loaded (%d points, %.3f s dwell)", outcome.job_id, outcome.point_count,
+                  outcome.total_dwell_s)
 
     def start(self, job_id: int) -> bool:
         """Action START; False (exception 3) unless ``job_id`` is loaded, or already started (a retry)."""
@@ -254,6 +302,8 @@ class PolishingMachine:
             self._halt_reason = StopReason.NONE
             run = self._run
             self._executed[job_id] = run.executed_s
+            while len(self._executed) > EXECUTED_HISTORY:  # bounded: a shift of jobs must not grow without end
+                self._executed.popitem(last=False)
             self._thread = threading.Thread(target=self._polish_safely, args=(run,), name=f"polishing-job-{job_id}",
                                             daemon=True)
             self._thread.start()
@@ -264,7 +314,7 @@ class PolishingMachine:
         with self._lock:
             if self._job_id != job_id:
                 return False
-            if self._state is JobState.LOADED:
+            if self._state in (JobState.LOADED, JobState.LOADING):
                 self._enter(JobEvent.STOP, StopReason.HOST_ABORT)
         self.stop(StopReason.HOST_ABORT)
         return True
@@ -277,10 +327,10 @@ class PolishingMachine:
                 self._halt.set()
 
     def close(self, timeout_s: float = 5.0) -> None:
-        """Stop any run (PLC_RESTART) and join its thread."""
+        """Stop any run (PLC_RESTART) and join its thread and the loader's."""
         self.stop(StopReason.PLC_RESTART)
         if not self.wait_idle(timeout_s):
-            raise TimeoutError(f"the polishing job thread did not stop within {timeout_s} s")
+            raise TimeoutError(f"the polishing job or loader thread did not stop within {timeout_s} s")
 
     # ----------------------------------------------------------------------------- internals
     def _enter(self, event: JobEvent, reason: StopReason) -> None:
@@ -288,31 +338,6 @@ class PolishingMachine:
         if state is None:
             raise RuntimeError(f"machine: {event.value} is not allowed in state {self._state.name}")
         self._state, self._reason = state, reason
-
-    def _check(self, job: MachineJob, announced: tuple[int, int, int, float]) -> None:
-        job_id, crc32, count, total = announced
-        s = self.settings
-        dwell, feed = job.dwell_s, job.feed_mm_s
-        file_total = float(np.sum(dwell))
-        checks = (
-            (job.crc32 == crc32, StopReason.CRC_MISMATCH, f"file CRC-32 {job.crc32:08x}, announced {crc32:08x}"),
-            (job.job_id == job_id, StopReason.ID_MISMATCH, f"file job id {job.job_id}, announced {job_id}"),
-            (job.point_count == count, StopReason.COUNT_MISMATCH, f"{job.point_count} points, announced {count}"),
-            (_close(file_total, job.total_dwell_s) and _close(file_total, total), StopReason.DWELL_MISMATCH,
-             f"dwell sums to {file_total:g} s, header {job.total_dwell_s:g} s, announced {total:g} s"),
-            (count <= s.max_points, StopReason.TOO_MANY_POINTS, f"{count} points > {s.max_points}"),
-            (file_total <= s.max_total_dwell_s, StopReason.TOTAL_DWELL_LIMIT,
-             f"total dwell {file_total:g} s > {s.max_total_dwell_s:g} s"),
-            (bool(np.all((dwell >= 0) & (dwell <= s.max_dwell_per_point_s))), StopReason.DWELL_LIMIT,
-             f"dwell outside [0, {s.max_dwell_per_point_s:g}] s"),
-            (bool(np.all((feed > 0) & (feed <= s.max_feed_mm_s))), StopReason.FEED_LIMIT,
-             f"feed outside (0, {s.max_feed_mm_s:g}] mm/s"),
-            (_within(job.x_mm, s.travel_x_mm) and _within(job.y_mm, s.travel_y_mm), StopReason.TRAVEL_LIMIT,
-             f"a point outside the travel x {s.travel_x_mm}, y {s.travel_y_mm} mm"),
-        )
-        for ok, reason, message in checks:
-            if not ok:
-                raise JobFileRefused(reason, f"job {job_id}: {message}")
 
     def _polish_safely(self, run: _Run) -> None:
         """The job thread: :meth:`_polish`; anything that escapes it ends the job ABORTED (MACHINE_FAULT)."""
@@ -393,12 +418,3 @@ class _SimClock:
         if wait > 0:
             self._halt.wait(wait)
         return self._stop_reason()
-
-
-def _close(a: float, b: float) -> bool:
-    """Equal to float32 precision of an announced value (relative 1e-6, absolute 1e-6 s)."""
-    return abs(a - b) <= 1e-6 * max(1.0, abs(a), abs(b))
-
-
-def _within(values: NDArray[np.float64], span: tuple[float, float]) -> bool:
-    return bool(np.all((values >= span[0]) & (values <= span[1])))

@@ -1,4 +1,4 @@
-"""The simulated PLC's program: register layout, watchdog, command handshake, status and outputs.
+"""The simulated PLC's program: ownership, watchdog, command handshake, jobs, status and outputs.
 
 Re-implemented from the register-map description in the README, without importing the driver's
 codec or map (a shared misunderstanding must not make both ends agree). The program is evaluated
@@ -8,9 +8,13 @@ each request's address and written values and lets it mirror its state into pymo
 
 Rules:
 
+- writes: one connection owns the heartbeat, command and job blocks (:mod:`.ownership`): the first
+  that claims it (with the owner block's token, or by the first heartbeat on a map without one),
+  until the watchdog trips; another connection's write there answers exception 1 (illegal
+  function: not for this connection); the re-arm register takes anyone's write (the operator's);
 - the watchdog (:class:`HeartbeatWatchdog`) counts only a *change* of the heartbeat register;
-  tripped, it zeroes the outputs and every request but a write of 1 to the re-arm register is
-  answered with exception 4;
+  tripped, it zeroes the outputs, ends the ownership, and every request but a write of 1 to the
+  re-arm register is answered with exception 4;
 - a write that changes the command id (to non-zero) shows the command once on the
   :class:`PolishingStation`'s display (the measured terms; it removes nothing: removal happens only
   through jobs); parameters it refuses answer exception 3 and change nothing; before the first
@@ -34,19 +38,18 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 from pymodbus.constants import ExcCodes
-from pymodbus.simulator import DataType, SimData
 
 from wavestack.simulators.plc.faults import SimFaults
+from wavestack.simulators.plc.layout import JOB_COUNT, MACHINE_COUNT, OWNER_COUNT, PlcSimLayout
 from wavestack.simulators.plc.job_state import StopReason
 from wavestack.simulators.plc.machine import PolishingMachine
+from wavestack.simulators.plc.ownership import NOBODY, Ownership, claim, closed, first_heartbeat, owns
 from wavestack.simulators.plc.polishing import PolishingStation, RemovalCommand
 from wavestack.simulators.plc.watchdog import HeartbeatWatchdog, WatchdogState
 from wavestack.simulators.plc.words import float_to_words, uint32_to_words, words_to_float, words_to_uint32
 
-__all__ = ["HISTORY_LENGTH", "PlcSimLayout", "PolishingPlcProgram", "SimOutputs", "float_to_words", "words_to_float"]
+__all__ = ["HISTORY_LENGTH", "PolishingPlcProgram", "SimOutputs", "float_to_words", "words_to_float"]
 
-#: Registers of the job block and of the machine block.
-JOB_COUNT, MACHINE_COUNT = 8, 7
 _LOAD, _START, _ABORT = 1, 2, 3
 
 #: Accepted commands the program remembers for tests (the newest; a long run must not grow without bound).
@@ -55,118 +58,6 @@ HISTORY_LENGTH = 10_000
 _log = logging.getLogger(__name__)
 
 _READY, _BUSY, _FAULT, _ESTOP, _HEARTBEAT_SEEN = 1, 2, 4, 8, 16
-_ORDERS = ("ABCD", "CDAB", "BADC", "DCBA")
-
-
-@dataclass(frozen=True)
-class PlcSimLayout:
-    """The simulated PLC's register layout (same meaning as the driver's register map).
-
-    Attributes
-    ----------
-    unit_id
-        Modbus unit id the PLC answers to.
-    self_check_register, self_check_value, self_check_word_order
-        2-register float32 constant.
-    heartbeat_register, rearm_register
-        Single writable registers.
-    status_register
-        Start of 3 read-only registers: status word, last accepted command id, heartbeat echo.
-    command_block, output_block
-        ``(start, count)``, count = 2 + 2 n for n terms. Command: id, passes, n float32 removals (nm);
-        outputs (read-only): spindle enable, active command id, n float32 set points (nm).
-    command_word_order, output_word_order
-        Byte order of the float32 values in those blocks.
-    watchdog_timeout_s
-        Heartbeat watchdog timeout, s.
-    pass_duration_s
-        Time one polishing pass keeps the PLC busy, s (0: a command completes at once).
-    read_function
-        Function code every block is read with: 3 (holding registers) or 4 (input registers).
-    single_write_function
-        Function code of the heartbeat and re-arm writes: 6, or 16 with one register. The command
-        block is always written with 16, whole (see :mod:`~wavestack.simulators.plc.access`).
-    job_register, machine_register
-        Starts of the 8-register job block (action, job id, uint32 CRC-32, uint32 point count,
-        float32 total dwell; written whole with 16) and the 7-register read-only machine block
-        (state, reason, job id, uint32 points done, uint32 point count); both or neither.
-    job_word_order
-        Byte order of the 32-bit values in those blocks (None: ``command_word_order``).
-    """
-
-    unit_id: int
-    self_check_register: int
-    self_check_value: float
-    self_check_word_order: str
-    heartbeat_register: int
-    rearm_register: int
-    status_register: int
-    command_block: tuple[int, int]
-    output_block: tuple[int, int]
-    command_word_order: str
-    output_word_order: str
-    watchdog_timeout_s: float
-    pass_duration_s: float = 0.0
-    read_function: int = 3
-    single_write_function: int = 6
-    job_register: int | None = None
-    machine_register: int | None = None
-    job_word_order: str | None = None
-
-    def __post_init__(self) -> None:
-        if (self.job_register is None) != (self.machine_register is None):
-            raise ValueError("job_register and machine_register come together: set both or neither")
-        if self.read_function not in (3, 4):
-            raise ValueError(f"read_function must be 3 or 4, got {self.read_function!r}")
-        if self.single_write_function not in (6, 16):
-            raise ValueError(f"single_write_function must be 6 or 16, got {self.single_write_function!r}")
-        for order in (self.self_check_word_order, self.command_word_order, self.output_word_order,
-                      self.job_word_order or self.command_word_order):
-            if order not in _ORDERS:
-                raise ValueError(f"unknown word order {order!r}; expected one of {_ORDERS}")
-        if self.command_block[1] != self.output_block[1] or self.command_block[1] < 4 or self.command_block[1] % 2:
-            raise ValueError(f"command and output blocks must both be 2 + 2 n registers, got "
-                             f"{self.command_block[1]} and {self.output_block[1]}")
-        if self.pass_duration_s < 0:
-            raise ValueError(f"pass_duration_s must be >= 0, got {self.pass_duration_s}")
-        spans = sorted([(self.self_check_register, 2), (self.heartbeat_register, 1), (self.rearm_register, 1),
-                        (self.status_register, 3), self.command_block, self.output_block,
-                        *([(self.job_register, JOB_COUNT), (self.machine_register, MACHINE_COUNT)]
-                          if self.job_register is not None and self.machine_register is not None else [])])
-        for (first, count), (second, _) in zip(spans, spans[1:]):
-            if second < first + count:
-                raise ValueError(f"register blocks starting at {first} and {second} overlap")
-
-    @property
-    def n_terms(self) -> int:
-        """Number of removal terms."""
-        return (self.command_block[1] - 2) // 2
-
-    def simdata(self) -> list[SimData]:
-        """pymodbus register blocks: writable heartbeat, re-arm and command; the rest read-only."""
-        constant = float_to_words(self.self_check_value, self.self_check_word_order)
-        return [
-            SimData(self.self_check_register, values=constant, datatype=DataType.REGISTERS, readonly=True),
-            SimData(self.heartbeat_register, values=0, datatype=DataType.REGISTERS),
-            SimData(self.rearm_register, values=0, datatype=DataType.REGISTERS),
-            SimData(self.status_register, count=3, values=0, datatype=DataType.REGISTERS, readonly=True),
-            SimData(self.command_block[0], count=self.command_block[1], values=0, datatype=DataType.REGISTERS),
-            SimData(self.output_block[0], count=self.output_block[1], values=0, datatype=DataType.REGISTERS,
-                    readonly=True),
-            *([SimData(self.job_register, count=JOB_COUNT, values=0, datatype=DataType.REGISTERS),
-               SimData(self.machine_register, count=MACHINE_COUNT, values=0, datatype=DataType.REGISTERS,
-                       readonly=True)] if self.job_register is not None and self.machine_register is not None else []),
-        ]
-
-    @property
-    def has_jobs(self) -> bool:
-        """Whether the map carries the job and machine blocks."""
-        return self.job_register is not None and self.machine_register is not None
-
-    @property
-    def job_order(self) -> str:
-        """Byte order of the 32-bit values in the job and machine blocks."""
-        return self.job_word_order or self.command_word_order
 
 
 @dataclass(frozen=True)
@@ -219,8 +110,20 @@ class PolishingPlcProgram:
         self._accepted: deque[int] = deque(maxlen=HISTORY_LENGTH)
         self._accepted_removals: deque[tuple[float, ...]] = deque(maxlen=HISTORY_LENGTH)
         self._accepted_count = 0
+        self._owner: Ownership = NOBODY
 
     # ----------------------------------------------------------------------------- ground truth
+    @property
+    def owner_connection(self) -> int | None:
+        """The connection that owns the PLC now (None: nobody, or the owner is between connections)."""
+        with self._lock:
+            return self._owner.connection
+
+    def connection_closed(self, connection: int) -> None:
+        """A connection closed: if it owned the PLC, the place waits for its token (module notes)."""
+        with self._lock:
+            self._owner = closed(self._owner, connection)
+
     def watchdog_state(self, now: float) -> WatchdogState:
         """The watchdog's state at ``now``."""
         with self._lock:
@@ -271,7 +174,7 @@ class PolishingPlcProgram:
 
     # ----------------------------------------------------------------------------- one request
     def on_request(self, address: int, written: list[int] | None, now: float, start_address: int,
-                   registers: list[int]) -> ExcCodes | None:
+                   registers: list[int], connection: int = 0) -> ExcCodes | None:
         """Run one scan for a request and mirror the state into pymodbus's ``registers``.
 
         Parameters
@@ -284,6 +187,8 @@ class PolishingPlcProgram:
             The clock, s.
         start_address, registers
             pymodbus's register memory (shared block) and the address of its first entry.
+        connection
+            Which connection sent the request (the server numbers them).
 
         Returns
         -------
@@ -292,7 +197,7 @@ class PolishingPlcProgram:
         """
         with self._lock:
             self._scan(now)
-            result = self._handle(address, written, now)
+            result = self._handle(address, written, now, connection)
             self._mirror(start_address, registers, now)
             return result
 
@@ -314,6 +219,7 @@ class PolishingPlcProgram:
             self.machine.stop(StopReason.PLC_RESTART)
         with self._lock:
             self._watchdog = HeartbeatWatchdog(self.layout.watchdog_timeout_s, self._watchdog.value)
+            self._owner = NOBODY
             self._outputs = self._zero_outputs()
             self._busy_until = now
 
@@ -322,10 +228,11 @@ class PolishingPlcProgram:
             if self.machine is not None:
                 self.machine.stop(StopReason.WATCHDOG)
             self._outputs = self._zero_outputs()
+            self._owner = NOBODY
             _log.warning("PLC simulator: watchdog tripped (no heartbeat change for %.3f s); outputs zeroed",
                          self.layout.watchdog_timeout_s)
 
-    def _handle(self, address: int, values: list[int] | None, now: float) -> ExcCodes | None:
+    def _handle(self, address: int, values: list[int] | None, now: float, connection: int) -> ExcCodes | None:
         layout = self.layout
         written = dict(zip(range(address, address + len(values)), values)) if values is not None else {}
         if self._watchdog.state is WatchdogState.TRIPPED:
@@ -335,6 +242,9 @@ class PolishingPlcProgram:
                 _log.warning("PLC simulator: watchdog re-armed")
                 return None
             return ExcCodes.DEVICE_FAILURE
+        refusal = self._check_owner(written, connection)
+        if refusal is not None:
+            return refusal
         if layout.heartbeat_register in written:
             beat = written[layout.heartbeat_register]
             self._watchdog.observe(beat, now)
@@ -359,6 +269,29 @@ class PolishingPlcProgram:
             if refusal is not None:
                 return refusal
             self._job_regs = regs
+        return None
+
+    def _check_owner(self, written: dict[int, int], connection: int) -> ExcCodes | None:
+        """Claims through the owner block; exception 1 for a write only the owner may make (module notes)."""
+        layout = self.layout
+        if layout.owner_register is not None and layout.owner_register in written:
+            token = tuple(written.get(layout.owner_register + i, 0) for i in range(OWNER_COUNT))
+            self._owner, taken = claim(self._owner, connection, token)
+            if not taken:
+                _log.warning("PLC simulator: connection %d claimed with a token that is not the owner's: refused",
+                             connection)
+                return ExcCodes.ILLEGAL_FUNCTION
+        start, count = layout.command_block
+        owner_only = [a for a in written if a == layout.heartbeat_register or start <= a < start + count
+                      or (layout.job_register is not None and layout.job_register <= a < layout.job_register + JOB_COUNT)]
+        if not owner_only:
+            return None
+        if layout.owner_register is None and layout.heartbeat_register in written:
+            self._owner = first_heartbeat(self._owner, connection)
+        if not owns(self._owner, connection):
+            _log.warning("PLC simulator: connection %d wrote register %d, which only the owner may write: refused",
+                         connection, owner_only[0])
+            return ExcCodes.ILLEGAL_FUNCTION
         return None
 
     def _job_action(self, registers: list[int], now: float) -> ExcCodes | None:
@@ -432,6 +365,8 @@ class PolishingPlcProgram:
         if layout.job_register is not None and layout.machine_register is not None:
             put(layout.job_register, self._job_regs)
             put(layout.machine_register, self._machine_words())
+        if layout.owner_register is not None:
+            put(layout.owner_register, [0] * OWNER_COUNT)  # write-only: a token is never read back
 
     def _machine_words(self) -> list[int]:
         if self.machine is None:

@@ -9,8 +9,14 @@ The server is a thin shell around :class:`~wavestack.simulators.plc.program.Poli
 - the server answers exactly as the register map says (:mod:`~wavestack.simulators.plc.access`): a
   function code the map never uses answers exception 1 when it is decoded, one the map uses for
   other registers (FC6 into the command block, a partial command write) exception 2;
-- the device ``action`` runs the program for every request: watchdog (exception 4 when tripped),
-  command handshake (exception 3 for refused parameters), status and outputs;
+- the device ``action`` runs the program for every request, with the number of the connection it
+  came on (each connection's request handler sets it, :class:`_Connection`): ownership (exception 1
+  for a write only the owner may make), watchdog (exception 4 when tripped), command handshake
+  (exception 3 for refused parameters), status and outputs;
+- at most ``max_connections`` connections at once (a real PLC's Modbus server has a fixed number
+  too): a newcomer at the cap takes the place of the longest-quiet connection that does not own
+  the PLC and has sent nothing for ``quiet_s``, else it is closed at once (counted,
+  :attr:`PlcSimulator.connections_refused`), so silent strangers cannot lock the station out;
 - :class:`SimFaults` switches: drop, truncate or corrupt replies through pymodbus's
   ``trace_packet`` hook (the request is still executed), delay replies in the action, freeze the
   heartbeat echo, press the e-stop; and :meth:`PlcSimulator.restart` for the server itself.
@@ -23,29 +29,109 @@ loop and joins the thread.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import logging
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from contextvars import ContextVar
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from types import TracebackType
 
 from pymodbus.constants import ExcCodes
 from pymodbus.pdu import ModbusPDU
 from pymodbus.server import ModbusTcpServer
+from pymodbus.server.requesthandler import ServerRequestHandler
 from pymodbus.simulator import SimDevice
 
 from wavestack.simulators.plc.access import check_request, refusing_request_classes
 from wavestack.simulators.plc.faults import SimFaults
 from wavestack.simulators.plc.machine import PolishingMachine
 from wavestack.simulators.plc.polishing import PolishingStation
-from wavestack.simulators.plc.program import HISTORY_LENGTH, PlcSimLayout, PolishingPlcProgram, SimOutputs
+from wavestack.simulators.plc.layout import PlcSimLayout
+from wavestack.simulators.plc.program import HISTORY_LENGTH, PolishingPlcProgram, SimOutputs
 from wavestack.simulators.plc.watchdog import WatchdogState
 
 __all__ = ["PlcSimulator", "RequestRecord"]
 
 _log = logging.getLogger(__name__)
+
+#: The connection a request came on, set by its handler's task for the program's action.
+_CONNECTION: ContextVar[int] = ContextVar("plc_connection", default=0)
+#: Connections served at once, and how long a connection must have been quiet to make room.
+MAX_CONNECTIONS, QUIET_S = 8, 10.0
+
+
+class _Connection(ServerRequestHandler):
+    """pymodbus's handler of one connection, which tells the program which connection a request is from."""
+
+    def __init__(self, server: _Server, number: int, on_close: Callable[[int], None]) -> None:
+        self.number = number
+        self.last_heard = time.monotonic()
+        self._on_close = on_close
+        self._admit = server.admit
+        trace_connect = server.trace_connect
+
+        def traced(connected: bool) -> None:
+            if trace_connect is not None:
+                trace_connect(connected)
+            if not connected:
+                on_close(number)
+        super().__init__(server, server.trace_packet, server.trace_pdu, traced)
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        super().connection_made(transport)
+        self._admit(self)
+
+    def callback_data(self, data: bytes, addr: tuple | None = None) -> int:
+        self.last_heard = time.monotonic()
+        return super().callback_data(data, addr)
+
+    def drop(self) -> None:
+        """Close this connection from the server's side."""
+        self.close()
+        self._on_close(self.number)
+
+    async def handle_request(self) -> None:
+        token = _CONNECTION.set(self.number)  # each request runs in a task of its own: the value is its own
+        try:
+            await super().handle_request()
+        finally:
+            _CONNECTION.reset(token)
+
+
+class _Server(ModbusTcpServer):
+    """``ModbusTcpServer`` whose connections are numbered (:class:`_Connection`)."""
+
+    def __init__(self, *args: object, numbers: Iterator[int], on_close: Callable[[int], None],
+                 owner: Callable[[], int | None], on_refused: Callable[[], None], max_connections: int,
+                 quiet_s: float, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._numbers = numbers
+        self._on_close = on_close
+        self._owner, self._on_refused = owner, on_refused
+        self._max_connections, self._quiet_s = max_connections, quiet_s
+
+    def callback_new_connection(self) -> _Connection:
+        return _Connection(self, next(self._numbers), self._on_close)
+
+    def admit(self, newcomer: _Connection) -> None:
+        """Keep ``newcomer`` within the cap, making room from a quiet stranger, or close it (module notes)."""
+        others = [c for c in self.active_connections.values() if c is not newcomer and isinstance(c, _Connection)]
+        if len(others) < self._max_connections:
+            return
+        now, owner = time.monotonic(), self._owner()
+        quiet = [c for c in others if c.number != owner and now - c.last_heard >= self._quiet_s]
+        if quiet:
+            oldest = min(quiet, key=lambda c: c.last_heard)
+            _log.warning("PLC simulator: %d connections; connection %d, quiet %.0f s, closed for a new one",
+                         len(others), oldest.number, now - oldest.last_heard)
+            oldest.drop()
+            return
+        _log.warning("PLC simulator: %d connections, none quiet: a new connection refused", len(others))
+        self._on_refused()
+        newcomer.drop()
 
 
 @dataclass(frozen=True)
@@ -73,6 +159,8 @@ class PlcSimulator:
         Monotonic clock in seconds (tests may pass their own).
     machine
         The polishing machine the job block drives (None: no jobs); :meth:`stop` stops its run.
+    max_connections, quiet_s
+        Connections served at once; how long one must have sent nothing to make room for a newcomer.
 
     Attributes
     ----------
@@ -88,7 +176,8 @@ class PlcSimulator:
 
     def __init__(self, layout: PlcSimLayout, station: PolishingStation, *, host: str = "127.0.0.1",
                  port: int = 0, clock: Callable[[], float] = time.monotonic,
-                 machine: PolishingMachine | None = None) -> None:
+                 machine: PolishingMachine | None = None, max_connections: int = MAX_CONNECTIONS,
+                 quiet_s: float = QUIET_S) -> None:
         if machine is not None and not layout.has_jobs:
             raise ValueError("a PLC simulator with a machine needs job_register and machine_register in its layout")
         self.faults = SimFaults()
@@ -104,10 +193,12 @@ class PlcSimulator:
         self._lock = threading.Lock()
         self._requests: deque[RequestRecord] = deque(maxlen=HISTORY_LENGTH)  # bounded: a soak must not grow
         self._request_count = 0
-        self._connections = 0
+        self._connections = self._refused = 0
+        self._max_connections, self._quiet_s = max_connections, quiet_s
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._server: ModbusTcpServer | None = None
+        self._server: _Server | None = None
+        self._numbering = itertools.count(1)  # runs on across restarts: a new connection is never an old one
         self._stopping: asyncio.Event | None = None
         self._ready = threading.Event()
         self._startup_error: BaseException | None = None
@@ -240,6 +331,16 @@ class PlcSimulator:
         with self._lock:
             return self._connections
 
+    @property
+    def connections_refused(self) -> int:
+        """Connections closed on arrival because the cap was full of connections that were not quiet."""
+        with self._lock:
+            return self._refused
+
+    def _count_refused(self) -> None:
+        with self._lock:
+            self._refused += 1
+
     # ----------------------------------------------------------------------------- the loop thread
     def _run(self) -> None:
         loop = asyncio.new_event_loop()
@@ -270,9 +371,12 @@ class PlcSimulator:
         await self._close()
 
     async def _open(self) -> None:
-        server = ModbusTcpServer(self._device, address=(self._host, self._port), trace_packet=self._trace_packet,
-                                 trace_pdu=self._trace_pdu, trace_connect=self._trace_connect,
-                                 custom_pdu=refusing_request_classes(self.layout))
+        server = _Server(self._device, address=(self._host, self._port), trace_packet=self._trace_packet,
+                         trace_pdu=self._trace_pdu, trace_connect=self._trace_connect,
+                         custom_pdu=refusing_request_classes(self.layout), numbers=self._numbering,
+                         on_close=self.program.connection_closed, owner=lambda: self.program.owner_connection,
+                         on_refused=self._count_refused, max_connections=self._max_connections,
+                         quiet_s=self._quiet_s)
         await server.serve_forever(background=True)
         self._server = server
         sockets = getattr(server.transport, "sockets", None) or ()
@@ -331,4 +435,4 @@ class PlcSimulator:
         if refusal is not None:
             return refusal
         written = [int(v) for v in set_values] if set_values is not None else None
-        return self.program.on_request(address, written, self._clock(), start_address, registers)
+        return self.program.on_request(address, written, self._clock(), start_address, registers, _CONNECTION.get())

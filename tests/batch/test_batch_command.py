@@ -100,6 +100,19 @@ def test_an_interrupted_campaign_resumes_where_it_stopped(campaign, expected, ba
     again = batch.run(*inputs, "--workers", "1", "--out", str(out))  # without --resume: refused, nothing lost
     assert again.status == 2 and "--resume" in again.stderr and _table(out, comparable) == {p: expected[p] for p in inputs}
 
+    # A summary commits to its rows (count and SHA-256): a rows file deleted or garbled since is not
+    # trusted; --resume analyses those recordings again and the table is whole (it lost rows silently).
+    rows_files = sorted((out / "results").glob("*.parquet"))
+    rows_files[0].unlink()
+    rows_files[1].write_bytes(b"PAR1 not what the summary committed to PAR1")
+    assert len(ResultsStore(out).committed()) == len(inputs) - 2
+    mended = batch.run(*inputs, "--workers", "1", "--out", str(out), "--json", "--resume")
+    assert mended.status == 0, mended.stderr
+    lines = _json_lines(mended.stdout)
+    assert len([line for line in lines if line["type"] == "recording"]) == 2
+    assert len(lines[-1]["resumed_recordings"]) == len(inputs) - 2
+    assert _table(out, comparable) == {p: expected[p] for p in inputs}
+
 
 def _free_port() -> int:
     with socket.socket() as probe:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -9,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from wavestack.batch import ResultsStore, analyse, fit_block, plan_recording, settings_hash
+from wavestack.batch import RecordingSummary, ResultsStore, analyse, fit_block, plan_recording, settings_hash
 from wavestack.batch.campaign import assemble
 from wavestack.batch.plan import whole_recording
 from wavestack.batch.rows import ResultRow
@@ -106,3 +107,24 @@ def test_settings_hash_separates_configurations_and_the_store_resumes_by_it(tmp_
     assert not list((tmp_path / "out").rglob("*.tmp"))
     (tmp_path / "out" / "summaries" / "broken.parquet").write_bytes(b"PAR1 cut")  # a crash's leftover
     assert store.done_keys() == {("f" * 64, "s" * 64)}
+
+
+def test_a_summary_commits_to_its_rows_and_resume_trusts_only_those_that_agree(tmp_path: Path) -> None:
+    store = ResultsStore(tmp_path / "out")
+    base = RecordingSummary("a.h5", "f" * 64, "s" * 64, "station", "ok", 1, 0, 0, 0, math.nan, "", "", "",
+                            0.0, 0.0, 0.0, 0.0, 0.0)
+    rows = [ResultRow(recording="a.h5", position=i, index=i, time_ns=0, frame_ids=(), valid=True, reason="",
+                      coefficients=(1.0,), units="waves", residual_rms=0.0, residual_pv=0.0, fitter="qr",
+                      fitter_fallback=False, unwrap_path="", aperture_id=0, aperture_changed=False,
+                      aperture_pixels=1, aperture_topology="disk", gram_condition=1.0, flips=0, max_beltrami=0.0,
+                      difference_rms=math.nan, residual_pv_difference=math.nan, affected_by_damage=False)
+            for i in range(6)]
+    for name, digest in (("a", "a" * 64), ("b", "b" * 64), ("c", "c" * 64)):
+        committed = store.write_recording(name, rows, dataclasses.replace(base, recording=f"{name}.h5",
+                                                                          file_sha256=digest))
+        assert committed.results == 6 and len(committed.rows_sha256) == 64
+    assert len(store.read_rows()) == 18 and len(store.done_keys()) == 3
+    (tmp_path / "out" / "results" / "a.parquet").unlink()  # deleted
+    (tmp_path / "out" / "results" / "b.parquet").write_bytes(b"garbage")  # replaced
+    assert store.done_keys() == {("c" * 64, "s" * 64)}  # a and b are analysed again by --resume
+    assert len(store.read_rows()) == 6  # and the table never counts rows it cannot vouch for

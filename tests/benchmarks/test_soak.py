@@ -10,12 +10,15 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 from soak_faults import FAULT_KINDS, make_schedule, select_kinds  # benchmarks/ is on pytest's pythonpath
-from soak_observe import Window
+from soak_observe import Observer, Window, device_snapshot
+from soak_polish import _check_run
 from soak_report import Sample, fault_problems, rss_verdict
 from soak_trips import FAILSAFE, FAILURE, TripLimits, classify_trip
 
@@ -146,8 +149,32 @@ def test_a_command_sent_while_the_plc_is_not_scanning_is_unsafe() -> None:
     estop = Window(6, "plc_estop", 10.0, clear_t_s=13.0, end_t_s=20.0)
     estop.results = estop.valid = 20
     estop.first_valid_after_clear_s = 0.1
-    estop.counts.update(estop_seen=5, sent_while_active=1)
-    assert fault_problems(estop) == ["UNSAFE: 1 commands sent while the e-stop was pressed"]
+    estop.counts.update(estop_seen=5, sent_while_active=1)  # accepted before the e-stop, its result after
+    assert fault_problems(estop) == []
+    estop.counts["commanded_after_estop_seen"] = 1  # tried after a result had shown the e-stop
+    assert fault_problems(estop) == ["UNSAFE: 1 commands sent while the e-stop was pressed and seen"]
+
+
+def _record(*, sent: bool, estop: bool, refused: bool = False) -> SimpleNamespace:
+    """A station record as the observer reads it: a command sent or refused, the e-stop bit of the status."""
+    command = SimpleNamespace(sent=sent, reason="PLC: refused (4)" if refused else None,
+                              status="READY|NOT_SENT" if refused else "READY")
+    output = SimpleNamespace(heartbeat=SimpleNamespace(ok=True, watchdog_tripped=False, estop=estop), command=command)
+    result = SimpleNamespace(valid=True, reason=None, output=output, counters=SimpleNamespace(
+        frames=SimpleNamespace(acquired=0)))
+    return SimpleNamespace(result=result)
+
+
+def test_a_command_tried_once_the_station_has_seen_the_e_stop_is_counted_and_one_accepted_before_is_not() -> None:
+    observer = Observer(time.monotonic())
+    snapshot = device_snapshot(None)
+    window = observer.open_window(Window(0, "plc_estop", observer.now(), clear_t_s=observer.now() + 60.0), snapshot, 0)
+    observer.add(_record(sent=True, estop=False))  # accepted just before the e-stop, its result after
+    assert window.counts["commanded_after_estop_seen"] == 0 and window.counts["sent_while_active"] == 1
+    observer.add(_record(sent=False, estop=True))  # the station sees it and holds
+    observer.add(_record(sent=False, estop=False, refused=True))  # tried anyway: the PLC refused it
+    observer.add(_record(sent=True, estop=True))  # tried with the e-stop in its own status
+    assert window.counts["commanded_after_estop_seen"] == 2
 
 
 def _soak(*options: str, timeout_s: float = 240.0) -> dict:
@@ -200,3 +227,34 @@ def test_the_operator_rearms_a_fail_safe_trip_and_the_same_station_sends_command
     assert rearms and rearms[-1]["status"] == "ok" and rearms[-1]["accepted_after"] >= 1, rearms
     assert report["run"]["restarts"] == 0 and report["run"]["crashes"] == 0
     assert not faults[-1]["watchdog_tripped_at_end"] and report["unhandled_exceptions"] == 0
+
+
+class _Machine:
+    """The machine's record as the polish soak reads it: ids loaded, dwell executed per job."""
+
+    def __init__(self, executed: dict[int, "np.ndarray"]) -> None:
+        self.used_job_ids, self._executed = frozenset(executed), executed
+
+    def wait_idle(self, timeout_s: float) -> bool:
+        return True
+
+    def executed_dwell_s(self, job_id: int) -> "np.ndarray":
+        return self._executed[job_id]
+
+
+def test_the_polish_soak_sees_a_job_applied_twice_or_lost(tmp_path: Path) -> None:
+    import numpy as np
+
+    from wavestack.drivers.plc import JobFile, write_job_file
+    from wavestack.polish import run_started
+
+    dwell = np.array([1.0, 2.0, 0.5])
+    write_job_file(tmp_path, JobFile(7, np.zeros(3), np.zeros(3), dwell, np.full(3, 10.0), 0.1, {}, {}))
+    row = replace(run_started(1, 7, rms_before_nm=1.0, pv_before_nm=1.0, noise_before_nm=0.1, predicted_rms_nm=0.5,
+                              predicted_pv_nm=0.5, total_dwell_s=3.5, points=3, job_crc32=0, started_unix_s=0.0,
+                              solve_s=0.0, floor_nm=0.0), machine_state="DONE", points_done=3)
+    assert _check_run(row, _Machine({7: dwell.copy()}), tmp_path) == []
+    twice = _check_run(row, _Machine({7: dwell * 2}), tmp_path)  # every point dwelt on twice
+    assert twice and "more dwell than the file asked" in twice[0]
+    assert "never loaded" in _check_run(row, _Machine({}), tmp_path)[0]
+    assert "gone from the job folder" in _check_run(replace(row, job_id=8), _Machine({8: dwell}), tmp_path)[0]

@@ -164,7 +164,7 @@ def _execute(plans: list[RecordingPlan], resumed: list[str], store: ResultsStore
                 queue.add(new)
             else:
                 rows, summary = assemble(state.plan, [state.outcomes[k] for k in sorted(state.outcomes)])
-                store.write_recording(f"{_stem(state.plan.path)}-{state.plan.key}", rows, summary)
+                summary = store.write_recording(f"{_stem(state.plan.path)}-{state.plan.key}", rows, summary)
                 pending.pop(task.key)
                 analysed.append(summary)
                 on_recording(summary)

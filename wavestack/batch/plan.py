@@ -26,6 +26,7 @@ import numpy as np
 from wavestack import __version__
 from wavestack.loop import MAP_KIND, read_campaign
 from wavestack.pipeline import InputError
+from wavestack.pipeline.formats import check_allocation
 from wavestack.recording import FORMAT_NAME, RecordingReader
 from wavestack.pipeline.formats.hdf5_open import open_hdf5_readonly
 
@@ -165,11 +166,21 @@ def _block_bounds(sets: int, starts: Sequence[int], min_sets: int) -> list[int]:
 
 
 def _inspect(path: str) -> tuple[Kind, int, list[int], str]:
-    """(kind, sets or maps, positions where an aperture was adopted, message)."""
+    """(kind, sets or maps, positions where an aperture was adopted, message).
+
+    A file that cannot be analysed is planned as ``unreadable`` with the reason naming it, whatever
+    went wrong in reading it: one bad file fails its own task, never the campaign's planning.
+    """
     try:
-        opened = open_hdf5_readonly(Path(path))
-    except InputError as error:  # not HDF5, a damaged superblock: reported in the results, not fatal
+        return _identify(path)
+    except InputError as error:
         return "unreadable", 0, [], str(error)
+    except Exception as error:  # noqa: BLE001 - a reader's bug on a hostile file: that file only, named
+        return "unreadable", 0, [], f"{path}: cannot be read ({type(error).__name__}: {error})"
+
+
+def _identify(path: str) -> tuple[Kind, int, list[int], str]:
+    opened = open_hdf5_readonly(Path(path))  # not HDF5, a damaged superblock: InputError
     try:
         attrs = opened.file.attrs
         found = attrs.get("format")
@@ -181,36 +192,35 @@ def _inspect(path: str) -> tuple[Kind, int, list[int], str]:
         if found != FORMAT_NAME and found != POLISH_FORMAT:
             return "unsupported", 0, [], (f"{path}: not a station recording (format {found!r}; expected "
                                           f"{FORMAT_NAME!r} from wavestack run --record)")
-        from_sets = _first_sets(opened.file)
     finally:
         opened.file.close()
     if found == POLISH_FORMAT:
-        return _inspect_campaign(path)
-    try:
-        with RecordingReader(path) as reader:
-            return "station", reader.n_sets, _adoption_positions(reader.set_indices, from_sets), ""
-    except InputError as error:
-        return "unreadable", 0, [], str(error)
+        return "polish", _polish_maps(path), [], ""
+    with RecordingReader(path) as reader:  # refuses what the file declares but does not hold, before allocating
+        return "station", reader.n_sets, _adoption_positions(reader.set_indices, reader.aperture_sets), ""
 
 
-def _inspect_campaign(path: str) -> tuple[Kind, int, list[int], str]:
-    """A polishing campaign's record: its intact measured maps (the loop kernel's map records)."""
-    try:
-        log = read_campaign(Path(path), POLISH_FORMAT)
-    except InputError as error:
-        return "unreadable", 0, [], str(error)
+def _polish_maps(path: str) -> int:
+    """The surface maps of a polish campaign record (the loop kernel's map records), checked to be what
+    the task may read: one block, read and stacked.
+
+    Raises
+    ------
+    InputError
+        An unreadable record, no intact first map with its aperture, maps whose shapes disagree with
+        the aperture, or maps beyond the memory budget.
+    """
+    log = read_campaign(Path(path), POLISH_FORMAT)  # each array's allocation is checked before it is read
     maps = log.of_kind(MAP_KIND)
     if not maps or "aperture_mask" not in maps[0].arrays:
-        return "unreadable", 0, [], f"{path}: polish campaign record without an intact first surface map"
-    return "polish", len(maps), [], ""
-
-
-def _first_sets(file: h5py.File) -> np.ndarray:
-    """The station set of each recorded aperture (empty when unreadable: the recording is then one task)."""
-    try:
-        return np.asarray(file["apertures/from_set"][:], dtype=np.int64)
-    except (KeyError, OSError, RuntimeError, ValueError, TypeError):
-        return np.zeros(0, np.int64)
+        raise InputError(f"{path}: polish campaign record without an intact first surface map")
+    mask_shape = maps[0].arrays["aperture_mask"].shape
+    shapes = {tuple(m.arrays["map"].shape) if "map" in m.arrays else None for m in maps}
+    if len(mask_shape) != 2 or shapes != {mask_shape}:
+        raise InputError(f"{path}: polish campaign record: surface maps {sorted(map(str, shapes))}, aperture "
+                         f"{mask_shape}; expected every map (H, W) as the aperture")
+    check_allocation(path, "surface maps", (2 * len(maps), *mask_shape), 8)  # read and stacked
+    return len(maps)
 
 
 def _adoption_positions(set_indices: np.ndarray, from_sets: np.ndarray) -> list[int]:

@@ -12,17 +12,20 @@ read in one call by pyarrow, pandas, polars or DuckDB, the whole directory as on
 finished Parquet file is never appended to: its footer is written last, so a file being appended
 to when the process dies is lost whole. Each recording's file is instead written complete under a
 temporary name, flushed and renamed (atomic on POSIX), rows first and summary second, so the
-summary is the commit mark: a crash loses at most the recordings in flight, never a written one,
-and ``--resume`` trusts exactly the recordings that have a summary. HDF5 would also be typed, but
-a crash while appending to one shared file can damage what it already holds.
+summary is the commit mark: a crash loses at most the recordings in flight, never a written one.
+The summary commits to its rows: it holds their count and the SHA-256 of the rows file, and
+``--resume`` trusts exactly the recordings whose summary and rows file agree (a rows file deleted,
+replaced or garbled since is analysed again; :meth:`ResultsStore.committed`). HDF5 would also be
+typed, but a crash while appending to one shared file can damage what it already holds.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import pyarrow as pa
@@ -57,6 +60,9 @@ class RecordingSummary:
         The reader's damage report and notes ("; "-joined), and why a file was skipped.
     phase_s, aperture_s, unwrap_s, fit_s, wall_s : float
         Seconds spent per stage and in the tasks, summed (measurements, not results).
+    rows_sha256 : str
+        SHA-256 of the recording's rows file as committed ("" until it is written); with
+        ``results`` (its row count), what the summary commits to.
     """
 
     recording: str
@@ -77,6 +83,7 @@ class RecordingSummary:
     unwrap_s: float
     fit_s: float
     wall_s: float
+    rows_sha256: str = ""
 
 
 def _schema(cls: type) -> pa.Schema:
@@ -108,8 +115,21 @@ class ResultsStore:
         return any(self._dir("summaries").glob("*.parquet")) if (self.root / "summaries").is_dir() else False
 
     def done_keys(self) -> set[tuple[str, str]]:
-        """(file_sha256, settings_hash) of every recording with a summary (committed)."""
-        return {(s.file_sha256, s.settings_hash) for s in self.summaries()}
+        """(file_sha256, settings_hash) of every committed recording (:meth:`committed`)."""
+        return {(s.file_sha256, s.settings_hash) for s in self.committed()}
+
+    def committed(self) -> list[RecordingSummary]:
+        """The summaries whose rows file is there and is what they commit to (row count and SHA-256)."""
+        return [summary for summary, _ in self._committed_files()]
+
+    def _committed_files(self) -> list[tuple[RecordingSummary, Path]]:
+        found = []
+        for path in sorted((self.root / "summaries").glob("*.parquet")):
+            rows = self.root / "results" / path.name
+            for summary in _read_summaries(path):
+                if summary.rows_sha256 and _sha256(rows) == summary.rows_sha256 and _row_count(rows) == summary.results:
+                    found.append((summary, rows))
+        return found
 
     def write_settings(self, settings_hash: str, config_toml: str | None) -> None:
         """Add a settings row unless present (the small table is rewritten atomically)."""
@@ -122,29 +142,21 @@ class ResultsStore:
                                    schema=_SETTINGS_SCHEMA)
         self._write_atomic(pa.concat_tables([table, row]), path)
 
-    def write_recording(self, name_key: str, rows: Sequence[ResultRow], summary: RecordingSummary) -> None:
-        """Commit one recording: its rows, then its summary (each file written whole, then renamed)."""
+    def write_recording(self, name_key: str, rows: Sequence[ResultRow], summary: RecordingSummary) -> RecordingSummary:
+        """Commit one recording: its rows, then its summary with their count and SHA-256 (each file
+        written whole, then renamed); returns the summary as committed."""
         base = _safe_name(name_key)
         table = pa.Table.from_pylist([asdict(r) for r in rows], schema=ROW_SCHEMA)
-        self._write_atomic(table, self._dir("results") / f"{base}.parquet")
+        rows_path = self._dir("results") / f"{base}.parquet"
+        self._write_atomic(table, rows_path)
+        summary = replace(summary, results=len(rows), rows_sha256=_sha256(rows_path))
         self._write_atomic(pa.Table.from_pylist([asdict(summary)], schema=SUMMARY_SCHEMA),
                            self._dir("summaries") / f"{base}.parquet")
-
-    def summaries(self) -> list[RecordingSummary]:
-        """Every committed summary (unreadable leftovers of a crash are ignored)."""
-        found = []
-        for path in sorted((self.root / "summaries").glob("*.parquet")):
-            try:
-                found.extend(RecordingSummary(**r) for r in pq.read_table(path, schema=SUMMARY_SCHEMA).to_pylist())
-            except (OSError, pa.ArrowException, TypeError):
-                continue
-        return found
+        return summary
 
     def read_rows(self) -> pa.Table:
-        """Every committed recording's rows, one table, sorted by recording and position."""
-        paths = [p for p in sorted((self.root / "results").glob("*.parquet"))
-                 if (self.root / "summaries" / p.name).exists()]
-        tables = [pq.read_table(p, schema=ROW_SCHEMA) for p in paths]
+        """Every committed recording's rows (:meth:`committed`), one table, sorted by recording and position."""
+        tables = [pq.read_table(rows, schema=ROW_SCHEMA) for _, rows in self._committed_files()]
         table = pa.concat_tables(tables) if tables else ROW_SCHEMA.empty_table()
         return table.sort_by([("recording", "ascending"), ("position", "ascending")])
 
@@ -166,6 +178,30 @@ class ResultsStore:
             os.fsync(directory)
         finally:
             os.close(directory)
+
+
+def _read_summaries(path: Path) -> list[RecordingSummary]:
+    try:
+        return [RecordingSummary(**r) for r in pq.read_table(path, schema=SUMMARY_SCHEMA).to_pylist()]
+    except (OSError, pa.ArrowException, TypeError):
+        return []
+
+
+def _sha256(path: Path) -> str:
+    """SHA-256 (hex) of a file's bytes, "" when it cannot be read."""
+    try:
+        with open(path, "rb") as stream:
+            return hashlib.file_digest(stream, "sha256").hexdigest()
+    except OSError:
+        return ""
+
+
+def _row_count(path: Path) -> int:
+    """Rows of a Parquet file (its footer), -1 when it is not one."""
+    try:
+        return int(pq.ParquetFile(path).metadata.num_rows)
+    except (OSError, pa.ArrowException):
+        return -1
 
 
 def _safe_name(text: str) -> str:

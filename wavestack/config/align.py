@@ -16,7 +16,7 @@ from typing import Any
 
 from wavestack.config.hexapod import HexapodSettings, parse_hexapod_config
 from wavestack.config.hexapod_sim import HexapodSimulatorSettings, parse_hexapod_sim_config
-from wavestack.config.schema import ConfigError, load_toml, parse_section, setting
+from wavestack.config.schema import ConfigError, parse_section, parse_toml, read_config_text, setting
 from wavestack.config.tma import parse_tma_config
 from wavestack.pipeline.telescope import AsBuiltErrors, TmaDesign
 
@@ -125,8 +125,5 @@ def parse_align_config(document: Mapping[str, Any], *, source: str, text: str = 
 def load_align_config(path: str | Path | None = None) -> AlignConfig:
     """Read a file (default: the simulated alignment bench shipped in the package)."""
     path = Path(path) if path is not None else DEFAULT_CONFIG
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as error:
-        raise ConfigError(f"{path}: cannot read the configuration ({error.strerror or error})") from None
-    return parse_align_config(load_toml(path), source=str(path), text=text)
+    text = read_config_text(path)
+    return parse_align_config(parse_toml(text, str(path)), source=str(path), text=text)

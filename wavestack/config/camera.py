@@ -4,7 +4,7 @@
 ``usb://SERIAL`` one by serial number, ``sim://u3v`` the simulated camera of a simulated
 bench (a pyusb backend the station builds itself, see :mod:`wavestack.simulators.bench`), and
 ``usbtcp://HOST:PORT[/SERIAL]`` a camera whose USB bus is served over TCP by another process
-(:mod:`wavestack.drivers.u3v.usb_tcp`: the remote alignment-bench simulator's camera).
+(:mod:`wavestack.drivers.usb_tcp`: the remote alignment-bench simulator's camera).
 ``gige://ADDRESS[:PORT]`` opens a GigE Vision camera by its address, ``gige://SERIAL`` by the
 serial its DISCOVERY reports (``?via=HOST[:PORT]`` asks one address instead of broadcasting), and
 ``sim://gige`` the simulated bench's camera as a GigE Vision camera on loopback.
@@ -24,7 +24,7 @@ from typing import Any, Literal
 
 from wavestack.config.schema import ConfigError, device_tables, parse_section, setting
 from wavestack.drivers.gige.discovery import parse_gige_url
-from wavestack.drivers.u3v.usb_tcp import parse_usbtcp_url
+from wavestack.drivers.usb_tcp import parse_usbtcp_url
 
 PixelFormat = Literal["Mono8", "Mono12", "Mono16"]
 

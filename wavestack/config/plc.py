@@ -72,7 +72,11 @@ class PlcLinkSettings:
                                        doc="first of 8 registers: job action, id, CRC-32, points, total dwell")
     machine_register: int | None = setting(320, minimum=0, maximum=65529,
                                            doc="first of 7 read-only registers: state, reason, job id, progress")
+    owner_register: int | None = setting(12, minimum=0, maximum=65532,
+                                         doc="first of 4 registers: the host's ownership token (FC16, whole)")
     job_folder: str | None = setting(None, doc="where the host writes job files (the machine's share)")
+    job_key_file: str | None = setting(None, doc="a file holding the job key (hex): job files carry their "
+                                                 "HMAC-SHA256 and the machine runs only those; relative to this file")
     job_max_points: int = setting(500_000, minimum=1, maximum=2**32 - 1, doc="most points in one job")
     job_max_total_dwell_s: float = setting(36_000.0, minimum=0.001, maximum=1e7, doc="longest total dwell, s")
     job_max_dwell_per_point_s: float = setting(60.0, minimum=0.001, maximum=1e5, doc="longest dwell at a point")
@@ -111,7 +115,7 @@ class PlcLinkSettings:
             block_write_function=self.command_write_function_code,
             self_check_word_order=self.self_check_word_order, command_word_order=self.command_word_order,
             output_word_order=self.output_word_order, job_register=self.job_register,
-            machine_register=self.machine_register)
+            machine_register=self.machine_register, owner_register=self.owner_register)
 
     def job_limits(self) -> JobLimits:
         """The host's job limits (raises ValueError for an empty travel)."""
@@ -185,6 +189,13 @@ class PlcConfig:
     link: PlcLinkSettings
     simulator: PlcSimulatorSettings | None
     source: str
+
+    def job_key_path(self) -> Path | None:
+        """``[plc] job_key_file``, relative to the configuration's folder (None: no job key)."""
+        if self.link.job_key_file is None:
+            return None
+        path = Path(self.link.job_key_file).expanduser()
+        return path if path.is_absolute() or self.source == "built-in defaults" else Path(self.source).parent / path
 
 
 def parse_plc_config(document: Mapping[str, Any], *, source: str) -> PlcConfig:

@@ -30,12 +30,11 @@ header) is refused with a line saying how to write it.
 from __future__ import annotations
 
 import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from wavestack.config.schema import ConfigError, load_toml, parse_section, setting
+from wavestack.config.schema import ConfigError, parse_section, parse_toml, read_config_text, setting
 from wavestack.config.station import parse_station_config
 from wavestack.config.station_schema import StationConfig
 
@@ -151,10 +150,7 @@ class PolishingConfig:
 
 def _split_polishing(text: str, source: str) -> tuple[str, dict[str, Any]]:
     """(station text, the [polishing] table) of a polishing file (module notes)."""
-    try:
-        document = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(f"{source}: not valid TOML ({error})") from None
+    document = parse_toml(text, source)
     if "polishing" not in document:
         raise ConfigError(f"{source}: missing table [polishing] (the closed loop's settings)")
     kept: list[str] = []
@@ -169,8 +165,8 @@ def _split_polishing(text: str, source: str) -> tuple[str, dict[str, Any]]:
     station_text = "".join(kept)
     rest = {k: v for k, v in document.items() if k != "polishing"}
     try:
-        separated = tomllib.loads(station_text) == rest
-    except tomllib.TOMLDecodeError:
+        separated = parse_toml(station_text, source) == rest
+    except ConfigError:
         separated = False
     if not separated:
         raise ConfigError(f"{source}: cannot separate the [polishing] tables from the station's; expected them "
@@ -218,5 +214,4 @@ def _check_simulated_surface(station: StationConfig, polishing: PolishingSetting
 def load_polishing_config(path: str | Path | None = None) -> PolishingConfig:
     """Read and check a polishing file (None: the packaged ``polishing.toml``, the simulated station)."""
     path = DEFAULT_POLISHING_CONFIG if path is None else Path(path)
-    load_toml(path)  # a missing or unreadable file gets its own clear message
-    return parse_polishing_config(path.read_text(encoding="utf-8"), source=str(path))
+    return parse_polishing_config(read_config_text(path), source=str(path))

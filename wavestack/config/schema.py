@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import re
+import stat
 import tomllib
 import types
 import typing
@@ -85,18 +87,56 @@ def url_kind(url: str) -> str | None:
     return match.group(1) if match else None
 
 
-def load_toml(path: str | Path) -> dict[str, Any]:
-    """Read a TOML file; a missing or malformed file raises :class:`ConfigError` naming it."""
+#: Largest configuration file read, bytes (the shipped ones are a few kilobytes).
+MAX_CONFIG_BYTES = 1 << 20
+
+
+def read_config_text(path: str | Path) -> str:
+    """The text of a configuration file: a regular file of at most :data:`MAX_CONFIG_BYTES`, UTF-8.
+
+    Opened without blocking (a FIFO is refused, not waited on) and read at most one byte past the
+    bound (``/dev/zero`` is refused, not read forever).
+
+    Raises
+    ------
+    ConfigError
+        Missing, not a regular file, too large, unreadable, or not UTF-8; the message names it.
+    """
     path = Path(path)
     try:
-        with path.open("rb") as handle:
-            return tomllib.load(handle)
+        descriptor = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such configuration file") from None
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(f"{path}: not valid TOML ({error})") from None
     except OSError as error:
         raise ConfigError(f"{path}: cannot read ({error.strerror})") from None
+    try:
+        with open(descriptor, "rb", closefd=True) as handle:
+            if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+                raise ConfigError(f"{path}: not a regular file (a folder, FIFO or device); expected a TOML file")
+            data = handle.read(MAX_CONFIG_BYTES + 1)
+    except OSError as error:
+        raise ConfigError(f"{path}: cannot read ({error.strerror})") from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"{path}: larger than {MAX_CONFIG_BYTES} bytes; expected a TOML configuration")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ConfigError(f"{path}: not UTF-8 text ({error.reason} at byte {error.start})") from None
+
+
+def parse_toml(text: str, source: str) -> dict[str, Any]:
+    """A TOML document; malformed or too deeply nested TOML raises :class:`ConfigError` naming ``source``."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{source}: not valid TOML ({error})") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: not valid TOML (arrays or tables nested too deeply)") from None
+
+
+def load_toml(path: str | Path) -> dict[str, Any]:
+    """Read a TOML file (:func:`read_config_text`, :func:`parse_toml`); errors are :class:`ConfigError`."""
+    return parse_toml(read_config_text(path), str(path))
 
 
 def device_tables(document: Mapping[str, Any], name: str, *, what: str,

@@ -37,14 +37,13 @@ Tables (see ``wavestack/config/default.toml``, the simulated station ``wavestack
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from wavestack.config._checks import BIT_DEPTH
 from wavestack.config.camera import CameraSimulatorSettings, parse_camera_config
-from wavestack.config.schema import ConfigError, load_toml, parse_section
+from wavestack.config.schema import ConfigError, parse_section, parse_toml, read_config_text
 from wavestack.config.surface import SurfaceSettings
 from wavestack.config.plc import parse_plc_config
 from wavestack.config.pzt import parse_pzt_config
@@ -79,10 +78,7 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
         (:meth:`ProcessingSettings.check`) and the rules across tables of
         :mod:`wavestack.config.station_rules`.
     """
-    try:
-        document = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as error:
-        raise ConfigError(f"{source}: not valid TOML ({error})") from None
+    document = parse_toml(text, source)
     unknown = sorted(set(document) - set(_TABLES))
     if unknown:
         raise ConfigError(f"{source}: unknown table [{unknown[0]}]; expected tables: {', '.join(_TABLES)}")
@@ -214,5 +210,4 @@ def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: Stat
 def load_station_config(path: str | Path | None = None) -> StationConfig:
     """Read and check a station file (None: the packaged ``default.toml``, the simulated station)."""
     path = DEFAULT_CONFIG if path is None else Path(path)
-    load_toml(path)  # a missing or unreadable file gets its own clear message
-    return parse_station_config(path.read_text(encoding="utf-8"), source=str(path))
+    return parse_station_config(read_config_text(path), source=str(path))

@@ -35,6 +35,9 @@ class StationSettings:
     set_ring_capacity: int = setting(2, minimum=1, maximum=64, doc="phase-shifted sets held for the pipeline")
     heap_release_s: float = setting(1.0, minimum=0.0, maximum=3600.0,
                                     doc="give freed heap memory back to the system at most this often, s (0: never)")
+    max_processing_s: float = setting(60.0, minimum=0.01, maximum=3600.0,
+                                      doc="longest a set's processing keeps the PLC heartbeat going, s; "
+                                          "beyond it the heartbeat stops and the watchdog trips")
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from wavestack.pipeline import InputError
+from wavestack.pipeline.formats import check_allocation
 from wavestack.pipeline.formats.hdf5_open import open_hdf5_readonly
 
 __all__ = ["CAMPAIGN_VERSION", "MAP_KIND", "CampaignEntry", "CampaignLog", "CampaignWriter", "read_campaign",
@@ -271,8 +272,8 @@ def read_campaign(path: Path, format_name: str | None = None) -> CampaignLog:
     Raises
     ------
     InputError
-        Not a file, not HDF5, a damaged superblock or root, another format, or a newer version;
-        the message names the file.
+        Not a file, not HDF5, a damaged superblock or root, another format, a newer version, or a
+        record array larger than the memory budget (checked before it is read); the message names the file.
     """
     path = Path(path)
     opened = open_hdf5_readonly(path)
@@ -302,7 +303,7 @@ def read_campaign(path: Path, format_name: str | None = None) -> CampaignLog:
             names = []
         for name in names:
             try:
-                entry, why = _read_entry(group[name], name)
+                entry, why = _read_entry(group[name], name, path)
             except (KeyError, ValueError, TypeError, OSError, RuntimeError) as error:
                 entry, why = None, f"unreadable ({error})"
             if entry is None:
@@ -325,14 +326,20 @@ def _read_header(root: Mapping[str, Any], damage: list[str]) -> tuple[dict[str, 
         return {}, ""
 
 
-def _read_entry(node: Any, name: str) -> tuple[CampaignEntry | None, str]:
+def _read_entry(node: Any, name: str, path: Path) -> tuple[CampaignEntry | None, str]:
     """One record checked against its CRC-32, or None and why not."""
     if not isinstance(node, h5py.Group):
         return None, "not a record group"
     if "crc32" not in node.attrs:
         return None, "incomplete (the writer stopped while writing it)"
     kind, text = str(_text(node.attrs["kind"])), str(_text(node.attrs["fields"]))
-    arrays = {key: np.asarray(node[key][()]) for key in node}
+    arrays = {}
+    for key in node:
+        dataset = node[key]
+        if not isinstance(dataset, h5py.Dataset):
+            return None, f"{key}: not a dataset"
+        check_allocation(path, f"record {name} {key}", dataset.shape, dataset.dtype.itemsize)  # before reading
+        arrays[key] = np.asarray(dataset[()])
     if int(node.attrs["crc32"]) != record_crc32(kind, text, arrays):
         return None, "CRC-32 mismatch (changed on disk)"
     return CampaignEntry(int(name), kind, json.loads(text), arrays), ""

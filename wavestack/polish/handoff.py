@@ -73,15 +73,16 @@ class MachineEnd:
         return self.state == "DONE"
 
 
-def write_job(folder: Path, job: JobFile) -> JobReceipt:
-    """Write ``job`` atomically into the job folder; returns its receipt (path, CRC-32, points, dwell).
+def write_job(folder: Path, job: JobFile, key: bytes | None = None) -> JobReceipt:
+    """Write ``job`` atomically into the job folder (with its HMAC under ``key``, when given); returns its
+    receipt (path, CRC-32, points, dwell).
 
     Raises
     ------
     OSError
         The job folder cannot be written.
     """
-    receipt = write_job_file(folder, job)
+    receipt = write_job_file(folder, job, key=key)
     logger.info("job %d written: %s (CRC-32 %08x, %d points, %.1f s)", job.job_id, receipt.path, receipt.crc32,
                 receipt.point_count, receipt.total_dwell_s)
     return receipt

@@ -30,8 +30,9 @@ from numpy.typing import NDArray
 
 from wavestack.config.polishing import PolishingConfig
 from wavestack.drivers.errors import DeviceError
-from wavestack.drivers.plc import PolishingLink
+from wavestack.drivers.plc import PolishingLink, read_job_key
 from wavestack.loop import Transitions, run_machine
+from wavestack.pipeline import InputError
 from wavestack.pipeline.polishing import ToolInfluence
 from wavestack.polish.handoff import MachineEnd, announce_and_start, state_name, wait_for_done, write_job
 from wavestack.polish.job_checks import JobRules, JobUnsafe, check_job
@@ -157,6 +158,11 @@ class PolishingLoop:
         self._measure_timeout_s = self._settings.max_results_per_measurement * station.station.frame_timeout_s
         self._rules = JobRules(self._settings.max_removal_nm_per_run, self._settings.max_total_dwell_s,
                                self._settings.freshness_s)
+        key_file = station.plc.job_key_path()
+        try:
+            self._job_key = None if key_file is None else read_job_key(key_file)
+        except ValueError as error:
+            raise InputError(f"{config.source}: [plc] job_key_file: {error}") from None
 
     # ------------------------------------------------------------------ the loop
     def run(self) -> CampaignSummary:
@@ -257,7 +263,7 @@ class PolishingLoop:
         try:
             job_id = self._link.next_job_id()
             receipt = write_job(self._folder, job_file_of(planned, job_id, self._tif, m.aperture.to_json(),
-                                                          self._settings.pixel_mm))
+                                                          self._settings.pixel_mm), self._job_key)
         except (DeviceError, OSError, ValueError) as error:
             return LoopEvent.FAULT, f"job not written: {error}"
         row = run_started(c.state.runs_done + 1, job_id, rms_before_nm=m.rms_nm, pv_before_nm=m.pv_nm,

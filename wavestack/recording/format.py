@@ -72,6 +72,8 @@ import h5py
 import numpy as np
 from numpy.typing import DTypeLike, NDArray
 
+from wavestack.pipeline.formats import InputError, check_allocation
+
 FORMAT_NAME: Final = "wavestack-recording"
 FORMAT_VERSION: Final = 3
 #: Versions this wavestack reads (1: no checksums; 2: no quality columns).
@@ -344,7 +346,8 @@ def read_rows(dataset: h5py.Dataset, n_rows: int, file_bytes: int) -> tuple[NDAr
 
     A chunk is damaged when its bytes lie beyond the end of the file (``file_bytes``: a truncated
     file reads as zeros there) or when HDF5 fails to read it (a ``fletcher32`` or metadata checksum
-    mismatch). Damaged rows are zeros in the returned array.
+    mismatch). Damaged rows are zeros in the returned array. Before anything is allocated the rows
+    are checked against what the file holds (:func:`check_declared_rows`).
 
     Returns
     -------
@@ -352,8 +355,14 @@ def read_rows(dataset: h5py.Dataset, n_rows: int, file_bytes: int) -> tuple[NDAr
     ok : ndarray of bool, (n_rows,)
     reason : str
         Why the first damaged chunk is damaged; "" if none is.
+
+    Raises
+    ------
+    InputError
+        Rows the file does not hold, or more than the memory budget.
     """
     n_rows = max(0, min(n_rows, len(dataset)))
+    check_declared_rows(dataset, n_rows)
     values = np.zeros((n_rows, *dataset.shape[1:]), dataset.dtype)
     ok = np.ones(n_rows, bool)
     step = dataset.chunks[0] if dataset.chunks else max(1, n_rows)
@@ -370,6 +379,33 @@ def read_rows(dataset: h5py.Dataset, n_rows: int, file_bytes: int) -> tuple[NDAr
             ok[start:stop] = False
             reason = reason or f"rows {start}-{stop - 1} {why}"
     return values, ok, reason
+
+
+def check_declared_rows(dataset: h5py.Dataset, n_rows: int) -> None:
+    """Refuse to read ``n_rows`` rows that the file does not hold, or that exceed the memory budget.
+
+    A dataset's length is only a declaration: a few megabytes of HDF5 can declare 2e8 rows whose
+    chunks were never written (they would read as zeros, 50 GB of them). The writer writes every
+    row it commits, so the chunks a dataset holds (in the file's chunk index, also when their
+    bytes lie beyond a truncated end) must cover the rows to be read; a truncated file's rows are
+    damaged rows, never a refusal. Then the rows must fit the memory budget
+    (:func:`~wavestack.pipeline.formats.limits.check_allocation`).
+
+    Raises
+    ------
+    InputError
+        Naming the file, the dataset and what it declares.
+    """
+    path, name = dataset.file.filename, dataset.name
+    if n_rows and dataset.chunks:
+        try:
+            covered = dataset.id.get_num_chunks() * dataset.chunks[0]
+        except (OSError, RuntimeError, ValueError) as error:  # an unreadable chunk index: damage, found per chunk
+            covered, _ = n_rows, error
+        if covered < n_rows:
+            raise InputError(f"{path}: malformed wavestack recording: {name} declares {n_rows} rows but its "
+                             f"chunks hold at most {covered}; a recorder writes every row it declares")
+    check_allocation(path, f"dataset {name}", (n_rows, *dataset.shape[1:]), dataset.dtype.itemsize)
 
 
 def _chunk_damage(dataset: h5py.Dataset, row: int, file_bytes: int) -> str:

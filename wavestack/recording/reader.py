@@ -5,8 +5,9 @@ described in :mod:`wavestack.recording.format`, the commit protocol in
 :mod:`wavestack.recording.writer`, why no read can wait in :mod:`wavestack.pipeline.formats.hdf5_open`.
 
 A malformed file (not HDF5, not a recording, a missing or mis-shaped dataset, a newer version, a
-damaged header) raises :class:`~wavestack.pipeline.InputError` naming the file and what was
-expected. A damaged part of a well-formed recording (a truncated tail, a chunk failing its
+damaged header, rows or sets it declares but does not hold, or that exceed the memory budget)
+raises :class:`~wavestack.pipeline.InputError` naming the file and what was expected, before
+anything of that size is allocated. A damaged part of a well-formed recording (a truncated tail, a chunk failing its
 checksum, a row failing its CRC-32) does not: the reader keeps what is intact and lists the rest in
 :attr:`RecordingReader.damage`; reading a damaged set raises :class:`RecordingDamaged`.
 """
@@ -26,6 +27,7 @@ from numpy.typing import NDArray
 
 from wavestack.drivers.frames import Frame
 from wavestack.pipeline import InputError
+from wavestack.pipeline.formats import check_allocation
 from wavestack.recording.format import (
     _FRAME_COLUMNS,
     FORMAT_NAME,
@@ -184,6 +186,7 @@ class RecordingReader:
         self.frames_per_set = int(pixels.shape[1])
         self.frame_shape = (int(pixels.shape[2]), int(pixels.shape[3]))
         self.frame_dtype = pixels.dtype
+        check_allocation(self.path, "one recorded set", tuple(pixels.shape[1:]), pixels.dtype.itemsize)
         set_index = self._dataset("sets/set_index", "iu", 1)
         columns = {n: self._dataset(f"sets/{n}", "iu", 2) for n in _FRAME_COLUMNS}
         metadata = self._file.get("sets/metadata", {})
@@ -315,6 +318,11 @@ class RecordingReader:
         """Every recorded set in order (see :meth:`read_set`; a damaged set raises)."""
         for i in range(self.n_sets):
             yield self.read_set(i)
+
+    @property
+    def aperture_sets(self) -> NDArray[np.int64]:
+        """The station set from which each recorded aperture applies (in recording order)."""
+        return self._aperture_from.astype(np.int64)
 
     def aperture_for(self, set_index: int) -> NDArray[np.bool_] | None:
         """The latest aperture recorded from or before station set ``set_index`` (bool, frame_shape).

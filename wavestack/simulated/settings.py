@@ -24,7 +24,8 @@ from wavestack.config.plc import MachineModelSettings, PlcSimulatorSettings
 from wavestack.config.pzt import PiezoSimulatorSettings
 from wavestack.simulators.mdt693b import MDT693BDevice, MDT693BPersonality
 from wavestack.simulators.pi_gcs import HexapodSimSettings
-from wavestack.simulators.plc import MachineSimSettings, PlcSimLayout, PolishingMachine, PolishingStation, RemovalTarget
+from wavestack.simulators.plc import (MachineSimSettings, PlcSimLayout, PolishingMachine, PolishingStation, RemovalTarget,
+                                      read_key_file)
 from wavestack.simulators.gige import GigESimSettings
 from wavestack.simulators.u3v import U3VSimSettings
 
@@ -119,7 +120,8 @@ def plc_layout(plc: PlcConfig) -> PlcSimLayout:
         output_word_order=link.output_word_order or link.word_order, watchdog_timeout_s=link.watchdog_timeout_s,
         read_function=link.read_function_code, single_write_function=link.single_write_function_code,
         pass_duration_s=plc.simulator.polishing.pass_duration_s if plc.simulator else 0.0,
-        job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order)
+        job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order,
+        owner_register=link.owner_register)
 
 
 def machine_settings(plc: PlcConfig, job_folder: str | Path | None = None) -> MachineSimSettings:
@@ -133,6 +135,11 @@ def machine_settings(plc: PlcConfig, job_folder: str | Path | None = None) -> Ma
         No job folder anywhere.
     """
     model = (plc.simulator.machine if plc.simulator else None) or MachineModelSettings()
+    key_file = plc.job_key_path()
+    try:
+        job_key = None if key_file is None else read_key_file(key_file)
+    except ValueError as error:
+        raise ConfigError(f"{plc.source}: [plc] job_key_file: {error}") from None
     folder = job_folder or model.job_folder or plc.link.job_folder
     if folder is None:
         raise ConfigError(f"{plc.source}: the simulated machine needs a job folder: [plc.simulator.machine] "
@@ -143,7 +150,7 @@ def machine_settings(plc: PlcConfig, job_folder: str | Path | None = None) -> Ma
         efficiency_spread=model.efficiency_spread, noise_nm=model.noise_nm, seed=model.seed,
         max_points=model.max_points, max_total_dwell_s=model.max_total_dwell_s,
         max_dwell_per_point_s=model.max_dwell_per_point_s, max_feed_mm_s=model.max_feed_mm_s,
-        travel_x_mm=model.travel_x_mm, travel_y_mm=model.travel_y_mm)
+        travel_x_mm=model.travel_x_mm, travel_y_mm=model.travel_y_mm, job_key=job_key)
 
 
 def polishing_machine(plc: PlcConfig, target: RemovalTarget | None,

@@ -25,7 +25,7 @@ from wavestack.drivers.genicam.camera_verbs import GenICamCamera
 from wavestack.drivers.gige import GigECamera
 from wavestack.drivers.plc import CommandLimits, PolishingLink
 from wavestack.drivers.u3v import U3VCamera
-from wavestack.drivers.u3v.usb_tcp import UsbTcpBackend, parse_usbtcp_url
+from wavestack.drivers.usb_tcp import UsbTcpBackend, parse_usbtcp_url
 from wavestack.station.truth import TruthCheck
 
 logger = logging.getLogger(__name__)
@@ -111,12 +111,12 @@ def reconnect_devices(devices: StationDevices, config: StationConfig, *, force_c
         logger.info("piezo %s is back", piezo.name)
 
 
-def _usb_backend(url: str, stack: ExitStack) -> UsbTcpBackend | None:
+def _usb_backend(url: str, stack: ExitStack, timeout_s: float) -> UsbTcpBackend | None:
     """The pyusb backend of a camera URL: libusb (None) for ``usb://``, the TCP bus for ``usbtcp://``."""
     if not url.startswith("usbtcp://"):
         return None
     host, port, _ = parse_usbtcp_url(url)
-    backend = UsbTcpBackend(host, port)
+    backend = UsbTcpBackend(host, port, io_timeout_s=timeout_s)
     stack.callback(backend.close)
     return backend
 
@@ -185,7 +185,7 @@ def _open_camera(config: StationConfig, simulated: Any, stack: ExitStack) -> U3V
     if simulated is not None and simulated.bench is not None:
         return U3VCamera.open(backend=simulated.bench.backend, timeout_s=settings.timeout_s,
                               ring_capacity=settings.ring_capacity)
-    return U3VCamera.open(backend=_usb_backend(settings.url, stack), serial=settings.serial,
+    return U3VCamera.open(backend=_usb_backend(settings.url, stack, settings.timeout_s), serial=settings.serial,
                           timeout_s=settings.timeout_s, ring_capacity=settings.ring_capacity)
 
 

@@ -27,8 +27,13 @@ carries the last consistent counters.
 
 A device fault is not a host fault: while the loop waits for a set or backs off, it waits in
 slices of at most the heartbeat period (a quarter of the PLC watchdog time) and keeps the PLC's
-heartbeat alive between them (:meth:`PlcOutput.keep_alive`, a heartbeat, never a command). Only a
-stalled pipeline (processing, or a device call that does not return) starves the watchdog. The
+heartbeat alive between them (:meth:`PlcOutput.keep_alive`, a heartbeat, never a command). A set
+is processed, and its surface figures taken, on the processing thread (one thread for the whole
+run) while the loop waits for it the same way, so the first aperture's detection, the first fitter
+and surface analyzer builds and the first compilation (seconds on a loaded machine) never starve
+the watchdog at start; but each for at most
+``[station] max_processing_s``: processing that takes longer gets no more heartbeats, and the
+watchdog trips. A stalled loop (a device call that does not return) beats nothing either. The
 stop event is seen within one slice.
 """
 
@@ -37,8 +42,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
-from typing import Union
+from typing import Any, TypeVar, Union
 
 from wavestack.config import BIT_DEPTH, StationConfig
 from wavestack.drivers.errors import DeviceDisconnected, DeviceError, DeviceTimeout, renewed
@@ -66,6 +72,7 @@ from wavestack.pipeline.instrument import ShackHartmannProcessor, SlopeOutcome
 from wavestack.station.sources import CarrierSource, PhaseStepSource
 
 logger = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
 __all__ = ["ResultSink", "Station", "StationSummary", "build_processor", "interferometer_settings"]
 
@@ -141,6 +148,7 @@ class Station:
         self.processor = build_processor(config, self._fitters)
         # one stepping thread for every source: a new one per reconnect would get a new malloc arena
         self._stepping = RoleThread("phase-step-acquisition") if config.phase_stepping else None
+        self._processing = RoleThread("station-processing")
         self._source: CarrierSource | PhaseStepSource | None = self._make_source()
         self._retired = Counters.zero(self._source.frames_per_set)  # sources of lost connections
         self._last_counters = self._retired  # the last snapshot that added up
@@ -175,6 +183,7 @@ class Station:
             self._source.stop()
         if self._stepping is not None:  # the source's stop waited for the stepping already
             self._stepping.close(timeout_s=self._config.camera.timeout_s * 2 + 5.0)
+        self._processing.close(timeout_s=self._config.station.max_processing_s + 5.0)
         if self._fitters is not None:
             self._fitters.close()
 
@@ -266,7 +275,8 @@ class Station:
         """One set, one way: outcome -> result -> output -> the record of the cycle."""
         check = self._devices.truth_check
         truth = check.capture(frames[0]) if check is not None else None  # at once: the simulator forgets
-        outcome = self.processor.process([f.pixels for f in frames])
+        pixels = [f.pixels for f in frames]
+        outcome = self._off_loop(lambda: self.processor.process(pixels))
         errors = check.compare(truth, outcome) if check is not None and truth is not None else None
         counters, miscount = self._counters()
         result = make_result(index, frames, outcome, ordering=self._config.processing.ordering,
@@ -275,11 +285,44 @@ class Station:
             result = replace(result, valid=False, reason=miscount)
         waves = None if isinstance(outcome, SlopeOutcome) else outcome.waves
         if self._surface is not None and result.valid and waves is not None:  # before the PLC: it shows them
-            result = replace(result, surface=self._surface.record(index, waves))
+            stage = self._surface
+            result = replace(result, surface=self._off_loop(lambda: stage.record(index, waves)))
         sent = self._output.send(result) if self._output is not None else None
         slopes = isinstance(outcome, SlopeOutcome)
         return CycleRecord(with_output(result, sent, now_ns=time.time_ns()), frames, outcome.new_aperture_mask,
                            outcome.lenslets if slopes else None, waves, None if slopes else outcome.flags)
+
+    def _off_loop(self, compute: Callable[[], _T]) -> _T:
+        """``compute()`` (a set's processing, its surface figures) on the processing thread while the
+        loop keeps the PLC alive for at most ``max_processing_s`` (module notes); its exception, if it
+        raised."""
+        box: list[tuple[bool, Any]] = []
+
+        def work() -> None:
+            try:
+                box.append((True, compute()))
+            except BaseException as error:  # noqa: BLE001 - raised again on the loop's thread
+                box.append((False, error))
+
+        job = self._processing.run(work)
+        started, budget_s, said = time.monotonic(), self._config.station.max_processing_s, False
+        while True:
+            job.join(self._slice_s)
+            if not job.is_alive():
+                break
+            if time.monotonic() - started <= budget_s:
+                self._keep_alive()
+            elif not said:
+                logger.error("processing a set has taken over max_processing_s = %g s: no more heartbeats until it "
+                             "returns (the PLC watchdog trips)", budget_s)
+                said = True
+        ok, value = box.pop()
+        if not ok:
+            try:
+                raise value
+            finally:  # no local naming the error: a cycle with this frame
+                del value
+        return value
 
     def _recover(self, stop: threading.Event, wait_s: float, *, force_camera: bool) -> None:
         """After a device fault: retire the source, back off, bring the devices back, start a new source.

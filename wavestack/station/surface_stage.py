@@ -5,8 +5,8 @@ wavelength * surface_factor``, nm) and is measured on a sub-grid of at most ``ma
 pixels (every k-th pixel each way): the form figures, PVr and the drawing's verdict every
 result, the FFT-based figures (PSD, filter) every ``spectra_every``-th result. The analyzer is
 built once per measured area and kept while the area stays the same; a new aperture (or new
-drop-outs) builds a new one. The stage is a plain object on the station's thread; what it makes
-is a frozen :class:`SurfaceRecord`.
+drop-outs) builds a new one. The stage is a plain object, called on the station's processing
+thread; what it makes is a frozen :class:`SurfaceRecord`.
 """
 
 from __future__ import annotations

@@ -23,8 +23,9 @@ from urllib.parse import urlsplit
 from aiohttp import WSCloseCode, web
 
 from wavestack.web.feed import LiveFeed
+from wavestack.web.hosts import host_name, machine_names, names_allowed
 from wavestack.web.slots import LatestSlot
-from wavestack.web.view import BrowserCounts, LiveUpdate, update_message
+from wavestack.web.view import BrowserCounts, LiveUpdate, update_body, with_counts
 
 logger = logging.getLogger(__name__)
 
@@ -61,6 +62,8 @@ class WebViewServer:
         0 for any free port.
     tick_s : float
         Period of the updates, s.
+    max_browsers : int
+        WebSockets served at once.
 
     Example
     -------
@@ -69,8 +72,14 @@ class WebViewServer:
     True
     """
 
-    def __init__(self, feed: LiveFeed, *, host: str = "127.0.0.1", port: int = 0, tick_s: float = 0.2) -> None:
+    def __init__(self, feed: LiveFeed, *, host: str = "127.0.0.1", port: int = 0, tick_s: float = 0.2,
+                 max_browsers: int = 16) -> None:
         self._feed, self._host, self._port, self._tick_s = feed, host, port, tick_s
+        self.max_browsers = max_browsers
+        self._machine = machine_names()
+        self._bodies: dict[tuple[int, bool, bool], str] = {}  # the latest update's texts, by variant
+        self.serialisations = 0  #: update texts made (one per update and variant, not per browser)
+        self.refused = 0  #: requests refused: a Host that is not this machine, one browser too many
         self._files = _static_files()
         self._thread: threading.Thread | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -139,7 +148,7 @@ class WebViewServer:
 
     async def _main(self) -> None:
         self._loop, self._stopping = asyncio.get_running_loop(), asyncio.Event()
-        app = web.Application()
+        app = web.Application(middlewares=[self._only_this_machine])
         app.add_routes([web.get("/", self._index), web.get("/static/{name}", self._static),
                         web.get("/update.json", self._update_json), web.get("/ws", self._websocket)])
         runner = web.AppRunner(app, handle_signals=False, access_log=None, shutdown_timeout=_FLUSH_S)
@@ -174,6 +183,7 @@ class WebViewServer:
         if update is None:
             return
         self._latest = update
+        self._bodies = {}
         for browser in self._browsers:
             browser.slot.put(update)
 
@@ -184,9 +194,29 @@ class WebViewServer:
         while any(b.slot.waiting or b.sent < b.slot.taken for b in self._browsers) and loop.time() < deadline:
             await asyncio.sleep(0.02)
         for ws in list(self._sockets):
-            await ws.close(code=WSCloseCode.GOING_AWAY, message=b"the station stopped")
+            if ws.prepared:  # a handshake still under way is ended with the server
+                await ws.close(code=WSCloseCode.GOING_AWAY, message=b"the station stopped")
 
     # ------------------------------------------------------------------ handlers
+    @web.middleware
+    async def _only_this_machine(self, request: web.Request, handler):  # type: ignore[no-untyped-def]
+        sockname = request.transport.get_extra_info("sockname") if request.transport is not None else None
+        arrived_on = str(sockname[0]).lower() if sockname else None
+        if not names_allowed(host_name(request.headers.get("Host")), bound=self._host, arrived_on=arrived_on,
+                             machine=self._machine):
+            self.refused += 1
+            raise web.HTTPMisdirectedRequest(text="the web view answers requests for this machine only")
+        return await handler(request)
+
+    def _body(self, update: LiveUpdate, with_png: bool, with_history: bool) -> str:
+        """The update's text for one variant, made once (:func:`~wavestack.web.view.update_body`)."""
+        key = (update.seq, with_png, with_history)
+        text = self._bodies.get(key)
+        if text is None:
+            text = self._bodies[key] = update_body(update, with_png=with_png, with_history=with_history)
+            self.serialisations += 1
+        return text
+
     async def _index(self, request: web.Request) -> web.Response:
         return self._file("index.html")
 
@@ -202,7 +232,7 @@ class WebViewServer:
     async def _update_json(self, request: web.Request) -> web.Response:
         if self._latest is None:
             raise web.HTTPServiceUnavailable(text="no update yet")
-        text = update_message(self._latest, self._counts(None), with_png=True, with_history=True)
+        text = with_counts(self._body(self._latest, True, True), self._counts(None))
         return web.Response(text=text, content_type="application/json", headers=_HEADERS)
 
     def _counts(self, browser: _Browser | None) -> BrowserCounts:
@@ -214,20 +244,24 @@ class WebViewServer:
         origin = request.headers.get("Origin")
         if origin is not None and urlsplit(origin).netloc != request.host:  # another site's page
             raise web.HTTPForbidden(text="the web view serves its own page only")
+        if len(self._sockets) >= self.max_browsers:
+            self.refused += 1
+            raise web.HTTPServiceUnavailable(text=f"the web view serves {self.max_browsers} browsers at once")
         ws = web.WebSocketResponse(heartbeat=10.0, timeout=_FLUSH_S)  # timeout: for the close handshake
-        await ws.prepare(request)
-        browser = _Browser()
-        self._browsers.add(browser)
-        self._sockets.add(ws)
-        if self._latest is not None:
-            browser.slot.put(self._latest)
-        sender = asyncio.create_task(self._send(ws, browser))
+        self._sockets.add(ws)  # counted from here: handshakes under way count against the cap too
+        browser, sender = _Browser(), None
         try:
+            await ws.prepare(request)
+            self._browsers.add(browser)
+            if self._latest is not None:
+                browser.slot.put(self._latest)
+            sender = asyncio.create_task(self._send(ws, browser))
             async for _ in ws:  # the page sends nothing; this ends when the browser goes
                 pass
         finally:
-            sender.cancel()
-            await asyncio.gather(sender, return_exceptions=True)
+            if sender is not None:
+                sender.cancel()
+                await asyncio.gather(sender, return_exceptions=True)
             self._browsers.discard(browser)
             self._sockets.discard(ws)
             self._dropped_gone += browser.slot.dropped
@@ -238,7 +272,7 @@ class WebViewServer:
             update = await browser.slot.get()
             with_png = update.map is not None and update.map.seq != browser.map_seq
             with_history = update.history is not None and update.history.seq != browser.history_seq
-            text = update_message(update, self._counts(browser), with_png=with_png, with_history=with_history)
+            text = with_counts(self._body(update, with_png, with_history), self._counts(browser))
             try:
                 await ws.send_str(text)
             except (ConnectionError, RuntimeError):  # the browser went while we wrote

@@ -18,7 +18,7 @@ from typing import Any
 from wavestack.loop import Cell
 
 __all__ = ["BrowserCounts", "Coefficient", "HistoryPanel", "LiveUpdate", "MapImage", "StationPanel",
-           "update_message"]
+           "update_body", "update_message", "with_counts"]
 
 Polygon = tuple[tuple[float, float], ...]
 
@@ -269,7 +269,10 @@ def _history_json(panel: HistoryPanel) -> dict[str, object]:
 
 
 def update_message(update: LiveUpdate, counts: BrowserCounts, *, with_png: bool, with_history: bool) -> str:
-    """One WebSocket text message: the update as JSON (NaN as null).
+    """One WebSocket text message: the update as JSON (NaN as null), with one browser's figures.
+
+    The update's part is :func:`update_body` (the server serialises it once per update and
+    variant, for every browser), the figures are spliced in by :func:`with_counts`.
 
     Parameters
     ----------
@@ -290,16 +293,26 @@ def update_message(update: LiveUpdate, counts: BrowserCounts, *, with_png: bool,
     -------
     >>> text = update_message(LiveUpdate(1, "wavestack run", "waiting", "", None, None, None),
     ...                       BrowserCounts(0, 0, 1, 0), with_png=False, with_history=False)
-    >>> json.loads(text)["state"]
-    'waiting'
+    >>> json.loads(text)["state"], json.loads(text)["browser"]["clients"]
+    ('waiting', 1)
     """
+    return with_counts(update_body(update, with_png=with_png, with_history=with_history), counts)
+
+
+def update_body(update: LiveUpdate, *, with_png: bool, with_history: bool) -> str:
+    """The update's JSON object without a browser's figures (see :func:`update_message`)."""
     message: dict[str, object] = {
         "type": "update", "seq": update.seq, "title": update.title, "state": update.state, "detail": update.detail,
         "renders": update.renders, "render_ms_mean": _finite(update.render_ms_mean),
-        "browser": {"sent": counts.sent, "dropped": counts.dropped, "clients": counts.clients,
-                    "dropped_all": counts.dropped_all},
         "station": None if update.station is None else _station_json(update.station),
         "map": None if update.map is None else _map_json(update.map, with_png),
         "history": None if update.history is None else (
             _history_json(update.history) if with_history else {"seq": update.history.seq})}
     return json.dumps(message, allow_nan=False, separators=(",", ":"))
+
+
+def with_counts(body: str, counts: BrowserCounts) -> str:
+    """``body`` (a JSON object from :func:`update_body`) with one browser's figures as its ``browser`` member."""
+    figures = {"sent": counts.sent, "dropped": counts.dropped, "clients": counts.clients,
+               "dropped_all": counts.dropped_all}
+    return '{"browser":' + json.dumps(figures, separators=(",", ":")) + "," + body[1:]

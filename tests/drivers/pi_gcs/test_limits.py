@@ -10,7 +10,7 @@ from fuzz import fuzz_settings
 from hypothesis import given
 from hypothesis import strategies as st
 
-from wavestack.drivers.pi_gcs import HexapodLimits, driver, error_codes, limits, link, move_refusals, protocol
+from wavestack.drivers.pi_gcs import HexapodLimits, driver, error_codes, limits, move_refusals, protocol
 
 AXES = ("X", "Y", "Z", "U", "V", "W")
 SOFT = {"X": (-5.0, 5.0), "Y": (-5.0, 5.0), "Z": (-2.0, 2.0), "U": (-1.0, 1.0), "V": (-1.0, 1.0), "W": (-3.0, 3.0)}
@@ -50,7 +50,7 @@ def test_an_accepted_move_respects_every_limit_and_a_refused_one_breaks_one(targ
     assert {reason.split(":")[0] for reason in refusals} == breaks
 
 
-@pytest.mark.parametrize("module", [protocol, error_codes, limits, link, driver], ids=lambda m: m.__name__)
+@pytest.mark.parametrize("module", [protocol, error_codes, limits, driver], ids=lambda m: m.__name__)
 def test_examples_run(module) -> None:
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0

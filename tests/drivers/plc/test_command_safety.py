@@ -21,10 +21,11 @@ from wavestack.drivers.plc import (
     HeartbeatEchoStale,
     LinkTiming,
     PlcNotReady,
+    PlcRefused,
     PolishingLink,
     RegisterMap,
 )
-from wavestack.simulators.plc import PlcSimLayout, PlcSimulator, PolishingStation
+from wavestack.simulators.plc import PlcSimLayout, PlcSimulator, PolishingStation, WatchdogState
 
 N_TERMS = 4
 TIMING = LinkTiming(io_timeout_s=0.5, reconnect_initial_s=0.02, reconnect_max_s=0.2, command_retries=2,
@@ -33,14 +34,14 @@ TIMING = LinkTiming(io_timeout_s=0.5, reconnect_initial_s=0.02, reconnect_max_s=
 
 def make_map() -> RegisterMap:
     return RegisterMap.build(unit_id=1, word_order="CDAB", self_check_register=0, self_check_value=12345.678,
-                             heartbeat_register=10, rearm_register=11, status_register=20,
+                             heartbeat_register=10, rearm_register=11, owner_register=12, status_register=20,
                              command_block=(100, 2 + 2 * N_TERMS), output_block=(200, 2 + 2 * N_TERMS))
 
 
 @contextmanager
 def plc(watchdog_timeout_s: float = 60.0) -> Iterator[tuple[PlcSimulator, PolishingLink]]:
     layout = PlcSimLayout(unit_id=1, self_check_register=0, self_check_value=12345.678, self_check_word_order="CDAB",
-                          heartbeat_register=10, rearm_register=11, status_register=20,
+                          heartbeat_register=10, rearm_register=11, owner_register=12, status_register=20,
                           command_block=(100, 2 + 2 * N_TERMS), output_block=(200, 2 + 2 * N_TERMS),
                           command_word_order="CDAB", output_word_order="CDAB", watchdog_timeout_s=watchdog_timeout_s)
     with PlcSimulator(layout, PolishingStation((10.0, 20.0, 30.0, 40.0), seed=3)) as sim:
@@ -216,22 +217,26 @@ def test_the_held_command_is_read_back_after_a_trip_and_after_another_clients_co
         with pytest.raises(CommandRefused):
             _send(link, 10.0)  # 10 nm from the 0 the machine holds now, not 5 from the 5 it held
         _send(link, 5.0)
-        with PolishingLink("127.0.0.1", sim.port, make_map(), TIMING) as other:  # someone else commands 8 nm
+        with PolishingLink("127.0.0.1", sim.port, make_map(), TIMING) as other:  # someone else tries 8 nm
             other.connect(timeout_s=2.0)
             other.self_check(timeout_s=1.0)
-            other.send_removal(other.next_command_id(), np.full(N_TERMS, 8.0), passes=1, timeout_s=2.0)
+            with pytest.raises(PlcRefused) as refused:  # the PLC is the station's: not for this connection
+                other.send_removal(other.next_command_id(), np.full(N_TERMS, 8.0), passes=1, timeout_s=2.0)
+            assert refused.value.exception_code == 1
         link.heartbeat(timeout_s=1.0)
-        _send(link, 13.0)  # counts from the 8 read back
-        assert np.asarray(sim.program.accepted_removals)[:, 0].tolist() == [5.0, 5.0, 8.0, 13.0]
+        _send(link, 13.0 - 5.0)
+        assert np.asarray(sim.program.accepted_removals)[:, 0].tolist() == [5.0, 5.0, 8.0]
 
 
 def test_ids_count_on_from_the_plcs_last_accepted_id() -> None:
-    with plc() as (sim, link):
+    with plc(watchdog_timeout_s=0.5) as (sim, link):
         ready(link)
         _send(link, 1.0)
         _send(link, 1.0)
+        link.close()  # the station stops; its watchdog trips; the PLC is nobody's until re-armed
+        assert wait_for(lambda: sim.watchdog_state is WatchdogState.TRIPPED)
         with PolishingLink("127.0.0.1", sim.port, make_map(), TIMING) as later:  # a restarted station
-            later.connect(timeout_s=2.0)
+            later.rearm(timeout_s=1.0)
             later.self_check(timeout_s=1.0)
             assert later.next_command_id() == 3
             _send(later, 1.0)

@@ -48,7 +48,7 @@ def make_station() -> PolishingStation:
 def make_layout(order: str = "CDAB", watchdog_timeout_s: float = LONG_WATCHDOG_S,
                 pass_duration_s: float = 0.0, **functions: int) -> PlcSimLayout:
     return PlcSimLayout(unit_id=1, self_check_register=0, self_check_value=CONSTANT, self_check_word_order=order,
-                        heartbeat_register=10, rearm_register=11, status_register=20,
+                        heartbeat_register=10, rearm_register=11, owner_register=12, status_register=20,
                         command_block=(100, 2 + 2 * N_TERMS), output_block=(200, 2 + 2 * N_TERMS),
                         command_word_order=order, output_word_order=order, watchdog_timeout_s=watchdog_timeout_s,
                         pass_duration_s=pass_duration_s, **functions)
@@ -56,7 +56,7 @@ def make_layout(order: str = "CDAB", watchdog_timeout_s: float = LONG_WATCHDOG_S
 
 def make_map(order: str = "CDAB", **functions: int) -> RegisterMap:
     return RegisterMap.build(unit_id=1, word_order=order, self_check_register=0,  # type: ignore[arg-type]
-                             self_check_value=CONSTANT, heartbeat_register=10, rearm_register=11,
+                             self_check_value=CONSTANT, heartbeat_register=10, rearm_register=11, owner_register=12,
                              status_register=20, command_block=(100, 2 + 2 * N_TERMS),
                              output_block=(200, 2 + 2 * N_TERMS), **functions)
 
@@ -115,7 +115,7 @@ def test_self_check_fails_closed_on_a_mismatched_word_order(actual: str, configu
         with pytest.raises(ProtocolError, match="self-check has not passed"):
             link.send_removal(1, REMOVAL_NM, passes=1, timeout_s=1.0)
         assert sim.accepted_commands == []
-        assert not any(r.function_code == 16 for r in sim.requests)
+        assert not any(r.function_code == 16 and r.address == 100 for r in sim.requests)
 
 
 def test_a_command_before_the_self_check_is_refused_without_a_packet() -> None:
@@ -123,7 +123,7 @@ def test_a_command_before_the_self_check_is_refused_without_a_packet() -> None:
         link.connect(timeout_s=2.0)
         with pytest.raises(ProtocolError, match="self-check has not passed"):
             link.send_removal(1, REMOVAL_NM, passes=1, timeout_s=1.0)
-        assert not any(r.function_code == 16 for r in sim.requests)
+        assert not any(r.function_code == 16 and r.address == 100 for r in sim.requests)
 
 
 def test_handshake_applies_a_command_exactly_once_under_retries_and_a_dropped_reply() -> None:
@@ -202,7 +202,9 @@ def test_server_restart_mid_run_and_the_driver_recovers_heartbeat_first() -> Non
         link.send_removal(2, REMOVAL_NM, passes=1, timeout_s=2.0)
         assert sim.accepted_commands == [1, 2]
         writes = [r for r in sim.requests[seen:] if r.function_code in (6, 16)]
-        assert (writes[0].function_code, writes[0].address) == (6, 10)  # the heartbeat comes first
+        # on the new connection the claim comes first (the owner block, this link's token), then the heartbeat
+        assert [(w.function_code, w.address) for w in writes[:2]] == [(16, 12), (6, 10)]
+        writes = writes[1:]
         command_index = next(i for i, r in enumerate(writes) if r.address == 100)
         assert all(r.address == 10 for r in writes[:command_index])
 
@@ -302,7 +304,7 @@ def test_estop_and_busy_refuse_commands() -> None:
         with pytest.raises(PlcNotReady, match="busy"):
             link.send_removal(2, REMOVAL_NM, passes=1, timeout_s=1.0)
         assert sim.accepted_commands == [1]
-        assert [r.values[0] for r in sim.requests if r.function_code == 16] == [1]  # only the accepted one
+        assert [r.values[0] for r in sim.requests if r.function_code == 16 and r.address == 100] == [1]  # the accepted
 
 
 def test_no_server_fails_with_device_disconnected_and_backs_off() -> None:

@@ -12,7 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from wavestack.drivers.plc import (WORD_ORDERS, JobAction, JobFile, JobLimits, JobReason, JobRefused, MachineState,
-                                   RegisterMap, WriteRefused, decode_machine, job_file_name, used_job_ids,
+                                   MachineStatus, RegisterMap, WriteRefused, decode_machine, job_file_name, used_job_ids,
                                    write_job_file)
 from wavestack.drivers.plc.jobs import JobLedger, JobSummary
 from wavestack.simulators.plc import StopReason, read_job_file
@@ -58,7 +58,7 @@ def test_the_reason_codes_agree_with_the_simulators_table() -> None:
     assert all(r.meaning for r in JobReason)
 
 
-@pytest.mark.parametrize("registers", [[6, 0, 1, 0, 0, 0, 0], [0, 99, 1, 0, 0, 0, 0], [0, 0, 0]])
+@pytest.mark.parametrize("registers", [[7, 0, 1, 0, 0, 0, 0], [0, 99, 1, 0, 0, 0, 0], [0, 0, 0]])
 def test_unknown_codes_and_wrong_lengths_are_refused(registers: list[int]) -> None:
     with pytest.raises(ValueError, match="unknown|registers"):
         decode_machine(registers, "ABCD")
@@ -115,25 +115,36 @@ def test_each_job_limit_names_the_value_and_the_limit(changes: dict[str, object]
 
 
 @fuzz_settings(200)
-@given(st.lists(st.tuples(st.sampled_from(["saw", "use", "next"]), st.integers(0, 65535)), max_size=40))
-def test_the_ledger_never_hands_out_a_used_or_seen_id(steps: list[tuple[str, int]]) -> None:
-    ledger, spent = JobLedger(), {0}
-    for kind, job_id in steps:
+@given(st.lists(st.tuples(st.sampled_from(["saw", "refused", "use", "next"]), st.sampled_from(list(MachineState)),
+                          st.sampled_from(list(JobReason)), st.integers(0, 65535)), max_size=40))
+def test_the_ledger_never_hands_out_a_spent_id_and_only_the_host_moves_it_on(
+        steps: list[tuple[str, MachineState, JobReason, int]]) -> None:
+    ledger, spent, own = JobLedger(), set(), 0
+    for kind, state, reason, job_id in steps:
+        status = MachineStatus(state, reason, job_id, 0, 0)
         if kind == "saw":
-            ledger.saw(job_id)
-            spent |= set(range(job_id + 1)) if job_id < 70000 else set()
+            ledger.saw(status)
+            if state in (MachineState.LOADED, MachineState.RUNNING, MachineState.DONE, MachineState.ABORTED):
+                spent.add(job_id)
+        elif kind == "refused":
+            ledger.refused(status)
+            if reason is JobReason.JOB_ID_USED:
+                spent.add(job_id)
         elif kind == "use" and job_id >= 1:
             ledger.use(job_id)
             spent.add(job_id)
+            own = max(own, job_id)
         else:
+            expected = next((i for i in range(own + 1, 65536) if i not in spent), None)
             try:
                 fresh = ledger.next_id()
             except JobRefused:
-                assert max(spent) == 65535
+                assert expected is None
                 continue
-            assert fresh not in spent and not ledger.used(fresh) and fresh > max(spent)
+            assert fresh == expected and not ledger.used(fresh)  # the first after the host's own, not spent
             ledger.use(fresh)
             spent.add(fresh)
+            own = fresh
 
 
 finite = st.floats(-1e6, 1e6, allow_nan=False, allow_subnormal=False)

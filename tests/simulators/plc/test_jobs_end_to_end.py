@@ -43,7 +43,7 @@ class RecordingTarget:
 
 def layout(watchdog_timeout_s: float) -> PlcSimLayout:
     return PlcSimLayout(unit_id=1, self_check_register=0, self_check_value=12345.678, self_check_word_order="CDAB",
-                        heartbeat_register=10, rearm_register=11, status_register=20, command_block=(100, 10),
+                        heartbeat_register=10, rearm_register=11, owner_register=12, status_register=20, command_block=(100, 10),
                         output_block=(200, 10), command_word_order="CDAB", output_word_order="CDAB",
                         watchdog_timeout_s=watchdog_timeout_s, job_register=JOB_REGISTER,
                         machine_register=MACHINE_REGISTER)
@@ -51,7 +51,7 @@ def layout(watchdog_timeout_s: float) -> PlcSimLayout:
 
 def register_map() -> RegisterMap:
     return RegisterMap.build(unit_id=1, word_order="CDAB", self_check_register=0, self_check_value=12345.678,
-                             heartbeat_register=10, rearm_register=11, status_register=20, command_block=(100, 10),
+                             heartbeat_register=10, rearm_register=11, owner_register=12, status_register=20, command_block=(100, 10),
                              output_block=(200, 10), job_register=JOB_REGISTER, machine_register=MACHINE_REGISTER)
 
 
@@ -133,7 +133,7 @@ def test_estop_mid_run_aborts_keeps_the_partial_removal_and_the_id_is_spent(tmp_
         # the part polished so far stays polished: removal = executed dwell x the tool's volume rate
         expected = float(executed.sum()) * GaussianTool(0.6, 5.0, 0.1).volume_per_second_px()
         assert 0 < target.total_nm == pytest.approx(expected, rel=5e-4)
-        with pytest.raises(JobRefused, match="used before"):  # the host never re-sends it
+        with pytest.raises(JobRefused, match="spent"):  # the host never re-sends it
             link.load_job(_receipt_for(tmp_path, job), job_id)
         sim.faults.estop = False
         assert link.start_job(job_id).state is MachineState.ABORTED  # a retried start: reported, never re-run
@@ -147,15 +147,17 @@ def _receipt_for(folder: Path, job: JobFile):  # noqa: ANN202
 
 
 def test_a_used_id_sent_by_another_host_is_refused_by_the_machine(tmp_path: Path) -> None:
-    with station(tmp_path) as (sim, link, _):
+    with station(tmp_path, watchdog_timeout_s=1.0) as (sim, link, _):
         job = make_job(1)
         receipt = write_job_file(tmp_path, job)
         link.load_job(receipt, 1)
         link.start_job(1)
         assert wait_for(lambda: link.read_machine().state is MachineState.DONE, beat=link)
+        link.close()  # that host goes away; its watchdog trips and the PLC is nobody's until re-armed
+        assert wait_for(lambda: sim.watchdog_state.name == "TRIPPED")
         second = PolishingLink("127.0.0.1", sim.port, register_map(), TIMING, job_limits=LIMITS)
         with second:  # a fresh host that knows nothing of job 1, bypassing its own ledger's view of the machine
-            second.connect(timeout_s=2.0)
+            second.rearm(timeout_s=1.0)
             second.self_check(timeout_s=1.0)
             second.heartbeat(timeout_s=1.0)
             second._jobs = type(second._jobs)()  # noqa: SLF001 (simulate a host that forgot)
@@ -245,3 +247,22 @@ def test_a_plc_restart_mid_run_ends_aborted_and_ids_move_on(tmp_path: Path) -> N
             fresh.connect(timeout_s=2.0)
             fresh.read_machine()
             assert fresh.next_job_id() == job_id + 1
+
+
+def test_a_refused_load_of_an_id_this_host_never_announced_spends_nothing(tmp_path: Path) -> None:
+    # issue 29, finding 1: one "LOAD 65535" (no file) used to make the host refuse every id, after a
+    # reconnect too. The machine refuses it (FAULT, job 65535): that id was never loaded or run.
+    with station(tmp_path) as (sim, link, _):
+        assert sim.machine is not None
+        sim.machine.load(65535, 0, 1, 1.0)
+        assert sim.machine.wait_idle(WAIT_S)
+        status = link.read_machine()
+        assert (status.state, status.job_id, status.reason) == (MachineState.FAULT, 65535, JobReason.FILE_MISSING)
+        job_id = link.next_job_id()
+        assert job_id == 1
+        link.load_job(write_job_file(tmp_path, make_job(job_id)), job_id)
+        link.start_job(job_id)
+        assert wait_for(lambda: link.read_machine().state is MachineState.DONE, beat=link)
+        link.close()  # a reconnect reads the machine again
+        link.read_machine()
+        assert link.next_job_id() == 2

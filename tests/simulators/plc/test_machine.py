@@ -14,19 +14,19 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from wavestack.simulators.plc import (GaussianTool, JobEvent, JobFileRefused, JobState, MachineSimSettings,
-                                      PolishingMachine, StopReason, next_state, read_job_file)
+                                      MachineSnapshot, PolishingMachine, StopReason, next_state, read_job_file)
 
 # What the README's table says, written out again (not derived from the module's table).
 EXPECTED = {
-    JobEvent.LOAD_OK: {JobState.IDLE: JobState.LOADED, JobState.LOADED: JobState.LOADED,
-                       JobState.DONE: JobState.LOADED, JobState.ABORTED: JobState.LOADED,
-                       JobState.FAULT: JobState.LOADED},
-    JobEvent.LOAD_REFUSED: {JobState.IDLE: JobState.FAULT, JobState.LOADED: JobState.FAULT,
-                            JobState.DONE: JobState.FAULT, JobState.ABORTED: JobState.FAULT,
-                            JobState.FAULT: JobState.FAULT},
+    JobEvent.LOAD: {JobState.IDLE: JobState.LOADING, JobState.LOADED: JobState.LOADING,
+                    JobState.DONE: JobState.LOADING, JobState.ABORTED: JobState.LOADING,
+                    JobState.FAULT: JobState.LOADING},
+    JobEvent.LOAD_OK: {JobState.LOADING: JobState.LOADED},
+    JobEvent.LOAD_REFUSED: {JobState.LOADING: JobState.FAULT},
     JobEvent.START: {JobState.LOADED: JobState.RUNNING},
     JobEvent.FINISH: {JobState.RUNNING: JobState.DONE},
-    JobEvent.STOP: {JobState.RUNNING: JobState.ABORTED, JobState.LOADED: JobState.ABORTED},
+    JobEvent.STOP: {JobState.RUNNING: JobState.ABORTED, JobState.LOADED: JobState.ABORTED,
+                    JobState.LOADING: JobState.ABORTED},
 }
 
 
@@ -40,6 +40,12 @@ def test_a_running_job_is_left_only_by_finish_or_stop() -> None:
     leaving = {e for e in JobEvent if next_state(JobState.RUNNING, e) not in (None, JobState.RUNNING)}
     assert leaving == {JobEvent.FINISH, JobEvent.STOP}
     assert {s for s in JobState if next_state(s, JobEvent.START) is JobState.RUNNING} == {JobState.LOADED}
+
+
+def settled(m: PolishingMachine, timeout_s: float = 10.0) -> MachineSnapshot:
+    """The machine once its load has settled (the loader thread is done): LOADED or FAULT."""
+    assert m.wait_idle(timeout_s)
+    return m.snapshot()
 
 
 def job_bytes(job_id: int = 3, points: list[list[float]] | None = None, **header: object) -> bytes:
@@ -135,7 +141,7 @@ def test_each_machine_check_refuses_with_its_reason(tmp_path: Path, rows: list[l
     values.update(announce or {})
     m = machine(tmp_path)
     assert m.load(3, int(values["crc"]), int(values["count"]), values["dwell"])
-    snapshot = m.snapshot()
+    snapshot = settled(m)
     assert (snapshot.state, snapshot.reason) == (JobState.FAULT, reason)
     assert m.start(3) is False and 3 not in m.used_job_ids
 
@@ -145,8 +151,9 @@ def test_a_retried_load_is_a_no_op_and_an_id_never_runs_twice(tmp_path: Path) ->
     (tmp_path / "job-00003.wsjob").write_bytes(data)
     crc = zlib.crc32(data[:data.rindex(b"\nwsjob")])
     m = machine(tmp_path, SumTarget())
-    assert m.load(3, crc, 2, 3.0) and m.load(3, crc, 2, 3.0)
-    assert m.snapshot().state is JobState.LOADED
+    assert m.load(3, crc, 2, 3.0) and m.load(3, crc, 2, 3.0)  # the second while loading, or loaded: a retry
+    assert settled(m).state is JobState.LOADED
+    assert m.load(3, crc, 2, 3.0) and m.snapshot().state is JobState.LOADED
     assert m.start(4) is False and m.start(3) and m.start(3)  # a retried start: the same run
     assert m.wait_idle(10.0)
     assert m.snapshot().state is JobState.DONE
@@ -160,6 +167,7 @@ def test_the_tool_errors_scale_the_removed_volume(tmp_path: Path, width_error: f
     target = SumTarget()
     m = machine(tmp_path, target, width_error=width_error, rate_error=rate_error)
     m.load(3, zlib.crc32(data[:data.rindex(b"\nwsjob")]), 2, 3.0)
+    settled(m)
     m.start(3)
     assert m.wait_idle(10.0)
     # volume = dwell x 2 pi sigma^2 x peak: (1 + width)^2 (1 + rate) times the nominal tool's
@@ -178,6 +186,7 @@ def test_a_machine_that_fails_mid_run_ends_aborted_not_running(tmp_path: Path,
     (tmp_path / "job-00003.wsjob").write_bytes(data)
     m = machine(tmp_path, BrokenTarget())
     m.load(3, zlib.crc32(data[:data.rindex(b"\nwsjob")]), 2, 3.0)
+    settled(m)
     m.start(3)
     assert m.wait_idle(10.0)
     snapshot = m.snapshot()
@@ -191,6 +200,7 @@ def test_an_abort_of_a_loaded_job_spends_it_without_polishing(tmp_path: Path) ->
     target = SumTarget()
     m = machine(tmp_path, target)
     m.load(3, zlib.crc32(data[:data.rindex(b"\nwsjob")]), 2, 3.0)
+    assert settled(m).state is JobState.LOADED
     assert m.abort(4) is False and m.abort(3)
     snapshot = m.snapshot()
     assert (snapshot.state, snapshot.reason, snapshot.points_done) == (JobState.ABORTED, StopReason.HOST_ABORT, 0)
@@ -217,5 +227,5 @@ def test_any_job_block_write_is_answered_and_never_raises(tmp_path_factory: pyte
     for registers in writes:
         answer = program.on_request(300, registers, 0.1, 0, memory)
         assert answer is None or int(answer) in (3, 4, 6)
-        assert 0 <= memory[320] <= 5 and 0 <= memory[321] <= 19  # the machine block holds a known state and reason
+        assert 0 <= memory[320] <= 6 and 0 <= memory[321] <= 19  # the machine block holds a known state and reason
     m.close()

@@ -1,29 +1,26 @@
 """A pyusb backend whose USB transfers travel over TCP to a USB bus on another host (``usbtcp://``).
 
-A USB3 Vision camera is a USB device of the host it is plugged into; this backend lets the
-unchanged driver (:class:`~wavestack.drivers.u3v.U3VCamera`) reach a camera served by another
-process, in the manner of USB/IP but in user space: every pyusb backend call (enumeration,
-descriptors, open, claim, bulk and control transfers, halts, reset) is one request and one reply
-on a TCP connection. It exists for the remote alignment-bench simulator (``wavestack sim
-align-bench``), which serves its simulated camera this way; a camera on a local bus needs none.
+A USB3 Vision camera is a USB device of the host it is plugged into; :class:`UsbTcpBackend` lets
+the unchanged driver (:class:`~wavestack.drivers.u3v.U3VCamera`) reach a camera served by another
+process, in the manner of USB/IP but in user space: every pyusb backend call is one request and
+one reply (:mod:`.protocol`) on a :class:`~wavestack.drivers.link.ByteLink`. It exists for the
+remote alignment-bench simulator (``wavestack sim align-bench``); a camera on a local bus needs none.
 
-Wire format, both ways: a 4-byte big-endian length of a UTF-8 JSON header, a 4-byte length of a
-binary payload, the header, the payload. A request header is ``{"op": NAME, "args": {...}}``
-(devices and handles as integer references the server hands out); a reply is ``{"value": ...}``,
-``{"usb_error": [message, backend_code, errno]}`` (re-raised as pyusb raises it) or
-``{"index_error": message}``. Each thread gets its own connection (the stream thread's long bulk
-reads never hold up the control channel); a connection that fails reads as an unplugged device
-(``ENODEV``), and enumeration on an unreachable server finds no device.
+Each thread gets its own connection (the stream thread's long bulk reads never hold up the control
+channel); all of them join one session, in which the backend's device handles live. Every call
+has a deadline: a transfer its own timeout plus ``margin_s``, anything else ``io_timeout_s``. A
+connection that fails, a server that does not answer by the deadline, reads as an unplugged device
+(``ENODEV``); a reply of the wrong shape as an I/O error (``EIO``; the camera driver's
+``ProtocolError``); enumeration on an unreachable server finds no device.
 """
 
 from __future__ import annotations
 
 import array
 import errno
-import json
-import socket
-import struct
+import logging
 import threading
+import time
 import urllib.parse
 from collections.abc import Iterator
 from types import SimpleNamespace
@@ -32,13 +29,23 @@ from typing import Any
 import usb.backend
 import usb.core
 
+from wavestack.drivers.errors import DeviceError
+from wavestack.drivers.link import ByteLink
+from wavestack.drivers.usb_tcp.protocol import (
+    HEAD,
+    MAX_HEADER_BYTES,
+    MAX_PAYLOAD_BYTES,
+    MalformedReply,
+    RemoteIndexError,
+    RemoteUsbError,
+    check_reply,
+    encode_request,
+    reply_framing,
+)
+
 __all__ = ["UsbTcpBackend", "parse_usbtcp_url"]
 
-_HEAD = struct.Struct(">II")
-_MAX_HEADER = 1 << 20
-_MAX_PAYLOAD = 64 << 20
-_CONNECT_S = 2.0
-_MARGIN_S = 5.0
+logger = logging.getLogger(__name__)
 
 
 def parse_usbtcp_url(url: str) -> tuple[str, int, str | None]:
@@ -60,37 +67,6 @@ def parse_usbtcp_url(url: str) -> tuple[str, int, str | None]:
     return parts.hostname, parts.port, parts.path.strip("/") or None
 
 
-class _Link:
-    """One TCP connection and its framing."""
-
-    def __init__(self, host: str, port: int) -> None:
-        self.sock = socket.create_connection((host, port), timeout=_CONNECT_S)
-        self.sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-    def call(self, header: dict[str, Any], payload: bytes, timeout_s: float | None) -> tuple[dict[str, Any], bytes]:
-        body = json.dumps(header).encode()
-        self.sock.settimeout(timeout_s)
-        self.sock.sendall(_HEAD.pack(len(body), len(payload)) + body + payload)
-        size, data_size = _HEAD.unpack(self._exactly(_HEAD.size))
-        if size > _MAX_HEADER or data_size > _MAX_PAYLOAD:
-            raise ConnectionError(f"reply of {size} + {data_size} bytes exceeds the limits")
-        reply = json.loads(self._exactly(size))
-        return reply, self._exactly(data_size)
-
-    def _exactly(self, count: int) -> bytes:
-        chunks, left = [], count
-        while left:
-            chunk = self.sock.recv(min(left, 1 << 20))
-            if not chunk:
-                raise ConnectionError("the USB server closed the connection")
-            chunks.append(chunk)
-            left -= len(chunk)
-        return b"".join(chunks)
-
-    def close(self) -> None:
-        self.sock.close()
-
-
 class _Device:
     """A remote device as ``enumerate_devices`` yields it."""
 
@@ -110,6 +86,10 @@ class UsbTcpBackend(usb.backend.IBackend):
     ----------
     host, port : str, int
         The server (``wavestack sim align-bench`` prints ``usb HOST:PORT``).
+    io_timeout_s : float
+        Deadline of a call that is not a transfer (connect, enumerate, descriptors, open, claim), s.
+    margin_s : float
+        Added to a transfer's own timeout for its reply to arrive, s.
 
     Example
     -------
@@ -118,21 +98,44 @@ class UsbTcpBackend(usb.backend.IBackend):
     []
     """
 
-    def __init__(self, host: str, port: int) -> None:
+    def __init__(self, host: str, port: int, *, io_timeout_s: float = 2.0, margin_s: float = 1.0) -> None:
+        if not (io_timeout_s > 0 and margin_s >= 0):
+            raise ValueError(f"io_timeout_s must be > 0 and margin_s >= 0, got {io_timeout_s!r}, {margin_s!r}")
         self._address = (host, int(port))
+        self._io_timeout_s, self._margin_s = float(io_timeout_s), float(margin_s)
+        self._name = f"USB server {host}:{int(port)}"
         self._local = threading.local()
         self._lock = threading.Lock()
-        self._links: list[_Link] = []
+        self._links: list[ByteLink] = []
+        self._session: str | None = None
         self._open_handles = 0
 
     # --- the connection -----------------------------------------------------------------------
-    def _link(self) -> _Link:
-        link = getattr(self._local, "link", None)
-        if link is None:
-            link = _Link(*self._address)
-            self._local.link = link
+    def _link(self, deadline: float) -> ByteLink:
+        link: ByteLink | None = getattr(self._local, "link", None)
+        if link is not None:
+            return link
+        host, port = self._address
+        link = ByteLink(f"tcp://[{host}]:{port}" if ":" in host else f"tcp://{host}:{port}", lambda: self._name,
+                        max_reply_bytes=HEAD.size + MAX_HEADER_BYTES + MAX_PAYLOAD_BYTES, poll_s=0.05)
+        link.open(max(1e-3, deadline - time.monotonic()))
+        try:
             with self._lock:
-                self._links.append(link)
+                session = self._session
+            reply = link.exchange(encode_request("hello", {"session": session}), reply_framing, deadline,
+                                  during="hello")
+            outcome = check_reply("hello", reply)
+            if not isinstance(outcome, tuple):
+                raise MalformedReply(f"hello answered {outcome}")
+        except BaseException:
+            link.close()
+            raise
+        with self._lock:
+            if self._session is not None and outcome[0] != self._session:
+                logger.info("%s: the session ended on the server; the handles it held are gone", self._name)
+            self._session = outcome[0]
+            self._links.append(link)
+        self._local.link = link
         return link
 
     def _drop_link(self) -> None:
@@ -145,39 +148,48 @@ class UsbTcpBackend(usb.backend.IBackend):
                     self._links.remove(link)
 
     def close(self) -> None:
-        """Close every connection (a later call opens new ones)."""
+        """Close every connection (a later call opens new ones, in a new session)."""
         with self._lock:
-            links, self._links = self._links, []
+            links, self._links, self._session = self._links, [], None
         for link in links:
             link.close()
         self._local = threading.local()
 
-    def _call(self, op: str, payload: bytes = b"", timeout_ms: int | None = None, **args: Any) -> tuple[Any, bytes]:
-        timeout = None if not timeout_ms else timeout_ms / 1000.0 + _MARGIN_S
+    def _call(self, op: str, payload: bytes = b"", timeout_ms: int | None = None, *, reply_size: int | None = None,
+              **args: Any) -> tuple[Any, bytes]:
+        """One request and its checked reply (module notes for the errors raised)."""
+        budget_s = timeout_ms / 1000.0 + self._margin_s if timeout_ms else self._io_timeout_s
+        request = encode_request(op, args, payload)
         for attempt in range(2):  # a kept connection the server dropped since is retried once on a new one
             reused = getattr(self._local, "link", None) is not None
+            deadline = time.monotonic() + budget_s
             try:
-                reply, data = self._link().call({"op": op, "args": args}, payload, timeout)
+                frame = self._link(deadline).exchange(request, reply_framing, deadline, during=op)
+                outcome = check_reply(op, frame, size=reply_size, sent=len(payload) if op == "bulk_write" else None)
                 break
-            except (OSError, ValueError) as error:  # refused, reset, closed, timed out, garbled
+            except MalformedReply as error:
                 self._drop_link()
-                if reused and attempt == 0 and not isinstance(error, TimeoutError):
-                    continue
-                raise usb.core.USBError(f"No such device (it may have been disconnected): USB server "
-                                        f"{self._address[0]}:{self._address[1]}: {error}", -4, errno.ENODEV) from None
-        if "usb_error" in reply:
-            message, code, number = reply["usb_error"]
-            cls = usb.core.USBTimeoutError if number == errno.ETIMEDOUT else usb.core.USBError
-            raise cls(message, code, number)
-        if "index_error" in reply:
-            raise IndexError(reply["index_error"])
-        return reply.get("value"), data
+                raise usb.core.USBError(f"Input/Output Error: {self._name} sent a malformed reply to {op} "
+                                        f"({error})", -1, errno.EIO) from None
+            except (DeviceError, OSError) as error:  # refused, reset, closed, no reply by the deadline
+                self._drop_link()
+                retry = reused and attempt == 0 and not isinstance(error, TimeoutError)
+                if not retry:
+                    raise usb.core.USBError(f"No such device (it may have been disconnected): {error}", -4,
+                                            errno.ENODEV) from None
+        if isinstance(outcome, RemoteUsbError):
+            cls = usb.core.USBTimeoutError if outcome.errno == errno.ETIMEDOUT else usb.core.USBError
+            raise cls(outcome.message, outcome.backend_code, outcome.errno)
+        if isinstance(outcome, RemoteIndexError):
+            raise IndexError(outcome.message)
+        return outcome
 
     # --- enumeration and descriptors ----------------------------------------------------------
     def enumerate_devices(self) -> Iterator[_Device]:
         try:
             found, _ = self._call("enumerate_devices")
-        except usb.core.USBError:
+        except usb.core.USBError as error:
+            logger.info("%s: no device enumerated (%s)", self._name, error)
             return iter(())
         return iter([_Device(ref, descriptor) for ref, descriptor in found])
 
@@ -237,20 +249,21 @@ class UsbTcpBackend(usb.backend.IBackend):
 
     def bulk_read(self, dev_handle: int, ep: int, intf: int, buff: array.array[int], timeout: int) -> int:
         size = len(buff) * buff.itemsize
-        _, data = self._call("bulk_read", b"", timeout, handle=dev_handle, ep=ep, intf=intf, size=size,
-                             timeout=timeout)
-        memoryview(buff).cast("B")[:len(data)] = data[:size]
-        return min(len(data), size)
+        count, data = self._call("bulk_read", b"", timeout, reply_size=size, handle=dev_handle, ep=ep, intf=intf,
+                                 size=size, timeout=timeout)
+        memoryview(buff).cast("B")[:count] = data
+        return int(count)
 
     def ctrl_transfer(self, dev_handle: int, bmRequestType: int, bRequest: int, wValue: int, wIndex: int,
                       data: array.array[int], timeout: int) -> int:
         size = len(data) * data.itemsize
         inbound = bool(bmRequestType & 0x80)
-        value, answer = self._call("ctrl_transfer", b"" if inbound else data.tobytes(), timeout, handle=dev_handle,
+        value, answer = self._call("ctrl_transfer", b"" if inbound else data.tobytes(), timeout,
+                                   reply_size=size if inbound else None, handle=dev_handle,
                                    bmRequestType=bmRequestType, bRequest=bRequest, wValue=wValue, wIndex=wIndex,
                                    size=size, timeout=timeout)
         if inbound:
-            memoryview(data).cast("B")[:len(answer)] = answer[:size]
+            memoryview(data).cast("B")[:value] = answer
         return int(value)
 
     def clear_halt(self, dev_handle: int, ep: int) -> None:

@@ -1,7 +1,7 @@
 """The driver reaches a simulated camera served over TCP (``usbtcp://``) exactly as over a local bus.
 
 The camera simulator's own backend is served by :class:`~wavestack.simulators.usb_tcp.UsbTcpServer`;
-the driver opens it through :class:`~wavestack.drivers.u3v.usb_tcp.UsbTcpBackend`. Expected pixel
+the driver opens it through :class:`~wavestack.drivers.usb_tcp.UsbTcpBackend`. Expected pixel
 values come from the simulator's frame source, not from the driver.
 """
 
@@ -12,7 +12,7 @@ import pytest
 
 from wavestack.drivers import DeviceError
 from wavestack.drivers.u3v import U3VCamera
-from wavestack.drivers.u3v.usb_tcp import UsbTcpBackend, parse_usbtcp_url
+from wavestack.drivers.usb_tcp import UsbTcpBackend, parse_usbtcp_url
 from wavestack.simulators.u3v import SimulatedU3VCamera, SimulatedUsbBackend, U3VSimSettings
 from wavestack.simulators.usb_tcp import UsbTcpServer
 
