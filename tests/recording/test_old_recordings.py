@@ -79,7 +79,10 @@ def test_the_new_row_only_adds_columns() -> None:
         "sets_processed", "sets_dropped", "sets_pending",
         # format version 3: the robust figures and the data-quality counts
         "pv", "pvr", "quality_inside", "quality_used", "quality_low_modulation", "quality_saturated",
-        "quality_untrusted_order", "quality_clipped", "quality_rim"}
+        "quality_untrusted_order", "quality_clipped", "quality_rim",
+        # and, in the same version, the live surface figures and the drawing's verdict
+        "surface_sag_nm", "surface_irr_nm", "surface_rsi_nm", "surface_rmst_nm", "surface_rmsi_nm", "surface_rmsa_nm",
+        "surface_pvr_nm", "spec_passed", "spec_limiting"}
     assert set(COLUMNS_BEFORE_COUNTERS) <= set(new)
 
 

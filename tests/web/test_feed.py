@@ -22,6 +22,8 @@ from wavestack.station import (
     SentCommand,
     StationResult,
 )
+from wavestack.pipeline import SurfaceRequest, parse_form_tolerance
+from wavestack.station.surface_stage import SurfaceStage
 from wavestack.web import BrowserCounts, LiveFeed, update_message
 
 
@@ -132,3 +134,29 @@ def test_the_message_carries_the_picture_and_the_table_only_when_asked() -> None
     assert full["history"]["rows"][0][0] == 0 and short["history"] == {"seq": update.history.seq}
     assert full["browser"] == {"sent": 3, "dropped": 1, "clients": 2, "dropped_all": 5}
     assert short["map"]["outline"] and short["map"]["vmin"] == full["map"]["vmin"]
+
+
+def test_the_page_shows_the_surface_figures_and_the_drawings_verdict() -> None:
+    # A 0.2-wave sphere of wavefront: ~63 nm of surface sagitta, about 0.2 fringes; the drawing
+    # allows 0.1 fringes of power, so it fails on SAG, and the page says so with the figures.
+    rows, cols = np.indices((120, 120))
+    x, y = (cols - 59.5) / 55, (59.5 - rows) / 55
+    waves = np.where(x * x + y * y <= 1, 0.2 * (x * x + y * y) + 0.01 * x * y, np.nan)
+    request = SurfaceRequest(tolerance=parse_form_tolerance("3/0.1(0.5/0.2)"))
+    record = SurfaceStage(request, wavelength_nm=632.8, surface_factor=0.5).measure(0, waves)
+    feed = LiveFeed("wavestack run", clock=Clock())
+    feed(CycleRecord(replace(_result(0, (0.1,) * 12), surface=record), waves=waves))
+    update = feed.update()
+    panel = update.station
+    assert panel.surface == (record.form.irr_nm, record.form.rmst_nm, record.pvr.pvr)
+    assert panel.spec == ("3/0.1(0.5/0.2)", False, "SAG") and record.verdict.limiting.quantity == "SAG"
+    message = update_message(update, BrowserCounts(0, 0, 0, 0), with_png=False, with_history=False)
+    station = json.loads(message)["station"]
+    assert station["spec"] == ["3/0.1(0.5/0.2)", False, "SAG"] and station["surface"][1] > 0
+
+
+def test_without_surface_figures_the_page_shows_none() -> None:
+    feed = LiveFeed("wavestack run", clock=Clock())
+    feed(CycleRecord(_result(0, (0.1,) * 12), waves=_map(0.0)))
+    panel = feed.update().station
+    assert panel.surface is None and panel.spec is None

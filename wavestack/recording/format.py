@@ -22,7 +22,10 @@ Layout (``format_version`` 3)::
 Version 3 adds the result columns of the data-quality mask and the robust figures: ``pv``,
 ``pvr`` and ``quality_inside``, ``quality_used``, ``quality_low_modulation``,
 ``quality_saturated``, ``quality_untrusted_order``, ``quality_clipped``, ``quality_rim`` (pixels of
-the fit grid);
+the fit grid), and the live surface figures with ``[surface]`` on: ``surface_sag_nm``,
+``surface_irr_nm``, ``surface_rsi_nm``, ``surface_rmst_nm``, ``surface_rmsi_nm``, ``surface_rmsa_nm``,
+``surface_pvr_nm`` (nm of surface, NaN where not measured), ``spec_passed`` (1, 0, -1: no verdict)
+and ``spec_limiting`` (the drawing's quantity nearest its limit);
 its integrity is version 2's. Versions 1 and 2 still read (without those columns).
 
 Strings are stored as UTF-8 bytes plus end offsets rather than HDF5 variable-length strings,

@@ -6,13 +6,16 @@ and the file is crash-safe from its first flush.
 
 Columns added since the first recordings (``residual_pv``, the frame and set counters
 ``frames_acquired`` .. ``sets_pending``, and in format version 3 ``pv``, ``pvr`` and the
-data-quality counts ``quality_inside`` .. ``quality_clipped``) are only new columns: the reader
+data-quality counts ``quality_inside`` .. ``quality_clipped``, the surface figures
+``surface_sag_nm`` .. ``surface_pvr_nm`` and the drawing's verdict ``spec_passed``,
+``spec_limiting``) are only new columns: the reader
 reads whatever columns a file has, so recordings made before them still read and replay (without
 those columns).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -24,6 +27,10 @@ from wavestack.recording.format import RowValue
 from wavestack.recording.paths import check_recording_path
 from wavestack.recording.writer import RecordingWriter
 from wavestack.station import Counters, CycleRecord, StationResult
+from wavestack.station.surface_stage import SurfaceRecord
+
+#: The ISO form figures a row carries (column ``surface_<key>_nm``) and their names in :class:`FormFigures`.
+SURFACE_FIGURES = {"sag": "SAG", "irr": "IRR", "rsi": "RSI", "rmst": "RMSt", "rmsi": "RMSi", "rmsa": "RMSa"}
 
 #: Numeric frame metadata the station records (the piezo tags of phase-stepped frames).
 FRAME_METADATA = ("pzt_commanded_v", "pzt_readback_v", "phase_step_rad")
@@ -48,7 +55,24 @@ def recording_row(result: StationResult, modes: int, frames_per_set: int) -> dic
         **counter_columns(result.counters),
         "pv": result.pv, "pvr": result.pvr,
         **quality_columns(result.quality),
+        **surface_columns(result.surface),
     }
+
+
+def surface_columns(record: SurfaceRecord | None) -> dict[str, RowValue]:
+    """The live surface figures as result columns: nm of surface (NaN without ``[surface]``), and the drawing's
+    verdict (``spec_passed``: 1 pass, 0 fail, -1 no tolerance or no figures; ``spec_limiting``: the quantity
+    nearest its limit, ``""`` without a verdict)."""
+    columns: dict[str, RowValue] = {f"surface_{key}_nm": math.nan for key in SURFACE_FIGURES}
+    columns.update(surface_pvr_nm=math.nan, spec_passed=-1, spec_limiting="")
+    if record is None:
+        return columns
+    by_quantity = record.form.by_quantity()
+    columns.update({f"surface_{key}_nm": float(by_quantity[name]) for key, name in SURFACE_FIGURES.items()})
+    columns["surface_pvr_nm"] = float(record.pvr.pvr)
+    if record.verdict is not None:
+        columns.update(spec_passed=int(record.verdict.passed), spec_limiting=record.verdict.limiting.quantity)
+    return columns
 
 
 def quality_columns(quality: PixelQuality | None) -> dict[str, RowValue]:

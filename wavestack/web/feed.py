@@ -30,6 +30,7 @@ from wavestack.pipeline.zernike import first_index, index_to_nm, mode_name
 from wavestack.station.cycle import CycleRecord
 from wavestack.station.live_view import LiveSnapshot, LiveStats
 from wavestack.station.results import FitDiagnostics, StationResult
+from wavestack.station.surface_stage import SurfaceRecord
 from wavestack.web.render import render_map
 from wavestack.web.view import Coefficient, HistoryPanel, LiveUpdate, MapImage, StationPanel
 
@@ -96,7 +97,9 @@ def station_panel(snapshot: LiveSnapshot, newest: StationResult | None, shown: S
         plc_state=heartbeat.state if heartbeat is not None else None,
         heartbeat_ok=heartbeat.ok if heartbeat is not None else None, last_reason=snapshot.last_reason,
         pv=shown.pv if shown is not None else None, pvr=shown.pvr if shown is not None else None,
-        quality=_quality(shown.quality) if shown is not None else None)
+        quality=_quality(shown.quality) if shown is not None else None,
+        surface=_surface(shown.surface) if shown is not None else None,
+        spec=_spec(shown.surface) if shown is not None else None)
 
 
 def _quality(quality: PixelQuality | None) -> tuple[int, int, int, int, int, int, int] | None:
@@ -104,6 +107,19 @@ def _quality(quality: PixelQuality | None) -> tuple[int, int, int, int, int, int
         return None
     q = quality
     return (q.inside, q.used, q.low_modulation, q.saturated, q.untrusted_order, q.clipped, q.rim)
+
+
+def _surface(record: SurfaceRecord | None) -> tuple[float, float, float] | None:
+    if record is None:
+        return None
+    return (record.form.irr_nm, record.form.rmst_nm, record.pvr.pvr)
+
+
+def _spec(record: SurfaceRecord | None) -> tuple[str, bool, str] | None:
+    if record is None or record.verdict is None:
+        return None
+    verdict = record.verdict
+    return (verdict.tolerance.notation, verdict.passed, verdict.limiting.quantity)
 
 
 class LiveFeed:

@@ -115,6 +115,10 @@ class StationPanel:
         The shown result's wavefront PV and Evans' robust PV, waves.
     quality : tuple of int or None
         The shown result's pixels ``(inside, used, low modulation, saturated, fringe order, clipped, rim)``.
+    surface : tuple or None
+        With ``[surface]`` on: the shown result's ``(IRR nm, RMSt nm, PVr nm)`` of surface, and with a
+        drawing tolerance ``(notation, passed, limiting quantity)`` in :attr:`spec`.
+    spec : tuple of (str, bool, str) or None
     truth_error_rms : float or None
         Simulated devices: measured minus true, waves RMS.
     safety : str or None
@@ -156,6 +160,8 @@ class StationPanel:
     pv: float | None = None
     pvr: float | None = None
     quality: tuple[int, int, int, int, int, int, int] | None = None
+    surface: tuple[float, float, float] | None = None
+    spec: tuple[str, bool, str] | None = None
 
 
 @dataclass(frozen=True)

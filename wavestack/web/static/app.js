@@ -60,6 +60,10 @@ function drawStation(s) {
   text("quality", s.quality === null ? "-" :
        `${s.quality[1]} used of ${s.quality[0]}; left out: low modulation ${s.quality[2]}, saturated ${s.quality[3]}, ` +
        `fringe order ${s.quality[4]}, clipped ${s.quality[5]}, rim ${s.quality[6]}`);
+  text("surface", s.surface === null ? "-" :
+       `IRR ${fixed(s.surface[0], 2)}, RMSt ${fixed(s.surface[1], 2)}, PVr ${fixed(s.surface[2], 2)} nm`);
+  text("spec", s.spec === null ? "-" :
+       `${s.spec[0]}: ${s.spec[1] ? "PASS" : "FAIL"} (limiting: ${s.spec[2]})`);
   text("truth-error", fixed(s.truth_error_rms, 4));
   text("last-reason", s.last_reason || "-");
   text("shown-index", s.shown_index >= 0 ? s.shown_index : "-");
