@@ -182,13 +182,14 @@ class InterferometerProcessor:
         -------
         InterferometerOutcome
             Invalid (with a reason) rather than raising for what a live stream can throw at it:
-            no fringes, an empty or unsupported aperture, a fit that cannot be done.
+            no fringes, frames of different shapes (a camera resized within a set), an empty or
+            unsupported aperture, a fit that cannot be done.
 
         Raises
         ------
         ValueError
-            A set of the wrong length or of frames of different shapes (a wiring error), or a
-            user's mask of another shape than the frames.
+            A set of the wrong length (a wiring error), or a user's mask of another shape than the
+            frames.
         """
         prepared = self.prepare(frames, fitter_method=fitter_method)
         if prepared.outcome is not None:

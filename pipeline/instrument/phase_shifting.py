@@ -53,10 +53,11 @@ class PhaseShiftingProcessor(InterferometerProcessor):
         expected = self.frames_per_set
         if expected is not None and len(frames) != expected:
             raise ValueError(f"expected {expected} frame(s) per set, got {len(frames)}")
-        if len({np.shape(f) for f in frames}) > 1:
-            raise ValueError(f"frames of one set differ in shape: {sorted({np.shape(f) for f in frames})}")
 
     def _phase(self, frames: Sequence[NDArray[np.generic]]) -> PhaseMaps:
+        shapes = {np.shape(f) for f in frames}
+        if len(shapes) > 1:  # a camera that changed its size within a set: invalid, not a fault
+            raise ValueError(f"the frames of the set differ in shape: {sorted(shapes)}")
         s = self.settings
         steps = None
         if s.psi_algorithm in _GIVEN_STEPS:

@@ -55,7 +55,7 @@ def measure_set(frames: Sequence[NDArray[np.generic]], settings: InterferometerS
     Raises
     ------
     ValueError
-        A set of the wrong length, frames of different shapes, or a mask of another shape.
+        A set of the wrong length, or a mask of another shape.
 
     Example
     -------
