@@ -196,7 +196,10 @@ class NodeMap:
                 raise
             named = type(error)(error.device, f"GenICam feature {name!r}: {error.detail}")
             named.feature = name  # type: ignore[attr-defined]
-            raise named from None
+            try:
+                raise named from None
+            finally:  # no local naming the raised error: its traceback holds this frame (a cycle)
+                del named
 
     def _feature(self, name: str) -> str:
         if name not in self:

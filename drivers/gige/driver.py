@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass
 from types import TracebackType
 
-from wavestack.drivers.errors import DeviceDisconnected, DeviceError, ProtocolError
+from wavestack.drivers.errors import DeviceDisconnected, DeviceError, ProtocolError, renewed
 from wavestack.drivers.frames import Frame
 from wavestack.drivers.genicam import NodeMap
 from wavestack.drivers.genicam.camera_features import CameraFeatures, unlock_quietly
@@ -192,10 +192,11 @@ class GigECamera(GenICamCamera):
                     return
 
     def _mark_lost(self, error: DeviceDisconnected) -> None:
+        kept = renewed(error)  # the caller may raise ``error``: its traceback would keep the caller's frames
         with self._state_lock:
             if self._lost is None:
-                self._lost = error
-        self._ring.close(error)
+                self._lost = kept
+        self._ring.close(kept)
 
     def _count(self, key: str, amount: int) -> None:
         with self._state_lock:

@@ -24,7 +24,7 @@ import usb.core
 import usb.util
 
 from wavestack.drivers._checks import check_timeout
-from wavestack.drivers.errors import DeviceDisconnected, DeviceError
+from wavestack.drivers.errors import DeviceDisconnected, DeviceError, renewed
 from wavestack.drivers.genicam.camera_features import CameraFeatures, unlock_quietly
 from wavestack.drivers.genicam.camera_verbs import GenICamCamera
 from wavestack.drivers.frames import Frame
@@ -129,10 +129,11 @@ class U3VCamera(GenICamCamera):
                     abrm.max_response_time_ms)
 
     def _mark_disconnected(self, error: DeviceDisconnected) -> None:
+        kept = renewed(error)  # the caller may raise ``error``: its traceback would keep the caller's frames
         with self._state_lock:
             if self._disconnected is None:
-                self._disconnected = error
-        self._ring.close(error)
+                self._disconnected = kept
+        self._ring.close(kept)
 
     def _live(self) -> Link:
         if self._closed:

@@ -6,8 +6,10 @@ simulator's ground truth (the renderer returns the pixels it drew as the truth).
 
 from __future__ import annotations
 
+import gc
 import threading
 import time
+import weakref
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -350,6 +352,35 @@ def test_unplug_mid_stream() -> None:
         with pytest.raises(DeviceDisconnected):
             _ = camera.width
         camera.stop()  # tolerated after an unplug
+
+
+class _CallersState:
+    """Something a caller of the camera holds in a local (a phase-step source, its ring of sets)."""
+
+
+def test_a_disconnect_seen_by_a_command_keeps_nothing_of_its_caller() -> None:
+    """The camera keeps why it was lost (raised again by every later call), but not the raised
+    error itself: its traceback reaches the caller's frame, and with it the caller's locals, for as
+    long as the camera lives."""
+    device = sim()
+    with opened(device) as camera:
+        held: list[weakref.ref] = []
+
+        def caller() -> None:
+            state = _CallersState()
+            held.append(weakref.ref(state))
+            camera.set_exposure_us(500.0, timeout_s=TIMEOUT_S)  # the control channel sees the unplug
+
+        device.unplug()
+        gc.disable()  # only reference counting frees: what the camera keeps stays
+        try:
+            with pytest.raises(DeviceDisconnected, match="device is gone"):
+                caller()
+            assert held[0]() is None, "the camera keeps the caller's frame through the error it raised"
+        finally:
+            gc.enable()
+        with pytest.raises(DeviceDisconnected, match="unplugged"):
+            camera.set_exposure_us(500.0, timeout_s=TIMEOUT_S)  # the loss is still known
 
 
 def test_replug_and_reopen_streams_again() -> None:
