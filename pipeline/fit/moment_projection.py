@@ -16,6 +16,7 @@ downdate takes them out of the normal equations.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -28,6 +29,7 @@ from .moment_chunks import FLOAT32_MAX_AMPLIFICATION, FLOAT32_MAX_DEGREE, Chunke
 from .run_moments import RunPass, run_pass_serves
 from .projection import Downdate, Projected, check_frame, check_frames, refuse_nonfinite
 from .results import NanPolicy
+from .sample_removal import ChangeBound
 
 logger = logging.getLogger(__name__)
 
@@ -246,17 +248,32 @@ class MomentProjection:
             moments = strip_moments(mask, self._strips, self._degree)
             gram, sums = gram_of([self._strip_transform(k) for k in range(len(self._strips))], moments)
             return Downdate(gram, sums, count)
-        gram = np.zeros((self.n_columns, self.n_columns))
-        sums = np.zeros(self.n_columns)
-        for k, b in enumerate(bad):
-            rows, cols = np.nonzero(b)
-            if rows.size == 0:
+        pixels = np.concatenate([(rows + strip.row0) * self.shape[1] + cols + strip.col0
+                                 for strip, (rows, cols) in zip(self._strips, map(np.nonzero, bad))])
+        values = self.rows_at(pixels)
+        return Downdate(values.T @ values, values.sum(axis=0), count)
+
+    def rows_at(self, pixels: NDArray[np.intp]) -> NDArray[np.float64]:
+        """The columns' values (float64, shape (k, K)) at flat pixel indices of fitted samples: one row each."""
+        rows, cols = np.divmod(np.asarray(pixels, dtype=np.intp), self.shape[1])
+        values = np.zeros((rows.size, self.n_columns))
+        for k, (strip, outside) in enumerate(zip(self._strips, self._outside)):
+            here = np.flatnonzero((rows >= strip.row0) & (rows < strip.row1) & (cols >= strip.col0) & (cols < strip.col1))
+            r, c = rows[here] - strip.row0, cols[here] - strip.col0
+            fitted = ~outside[r, c]
+            here, r, c = here[fitted], r[fitted], c[fitted]
+            if here.size == 0:
                 continue
-            products = (self._rows[k][rows][:, :, None] * self._cols[k][cols][:, None, :]).reshape(rows.size, -1)
-            values = products[:, self._index] @ self._strip_transform(k).T
-            gram += values.T @ values
-            sums += values.sum(axis=0)
-        return Downdate(gram, sums, count)
+            products = (self._rows[k][r][:, :, None] * self._cols[k][c][:, None, :]).reshape(r.size, -1)
+            values[here] = products[:, self._index] @ self._strip_transform(k).T
+        return values
+
+    @functools.cached_property
+    def change_bound(self) -> ChangeBound:
+        """How far a change of the terms can move a sample (computed once, on first use)."""
+        pixels = np.flatnonzero(self.state.mask)
+        step = 1 << 14
+        return ChangeBound.of(lambda: (self.rows_at(pixels[i:i + step]) for i in range(0, pixels.size, step)))
 
     def evaluate(self, terms: NDArray[np.float64], mask: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
         """``A @ terms`` on the fitted pixels (or on ``mask``), NaN elsewhere; shape (rows, cols)."""

@@ -8,6 +8,7 @@ which keeps float32 sums accurate.
 
 from __future__ import annotations
 
+import functools
 import logging
 
 import numpy as np
@@ -15,6 +16,7 @@ from numpy.typing import NDArray
 
 from .projection import Downdate, Projected, check_frame, check_frames, refuse_nonfinite
 from .results import NanPolicy
+from .sample_removal import ChangeBound
 
 logger = logging.getLogger(__name__)
 
@@ -91,6 +93,17 @@ class OperatorProjection:
                 results.append(Projected(products[i], float(squares[i]), 0.0, float(mean), None, kept, None)
                                if finite else None)
         return results
+
+    def rows_at(self, pixels: NDArray[np.intp]) -> NDArray[np.float64]:
+        """The operator's rows (float64, shape (k, K)) at flat pixel indices of fitted samples."""
+        return self.operator[np.searchsorted(self.flat_index, pixels)].astype(np.float64)
+
+    @functools.cached_property
+    def change_bound(self) -> ChangeBound:
+        """How far a change of the terms can move a sample (computed once, on first use)."""
+        step = 1 << 14
+        return ChangeBound.of(lambda: (self.operator[i:i + step].astype(np.float64)
+                                       for i in range(0, self.n_samples, step)))
 
     def evaluate(self, terms: NDArray[np.float64]) -> NDArray[np.float64]:
         """``A @ terms`` on the fitted samples, NaN elsewhere; shape (rows, cols)."""

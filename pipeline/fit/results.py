@@ -18,6 +18,7 @@ from .physical_terms import PhysicalTerms
 
 if TYPE_CHECKING:  # only for annotations: the results do not need the map's modules
     from ..mapping import CanonicalMap
+    from .sample_removal import RefitState
 
 
 NanPolicy = Literal["raise", "omit"]
@@ -188,6 +189,10 @@ class FitResult:
         requested ordering and normalisation.
     removed : PhysicalTerms or None
         Piston, tilt (and power) removed in physical coordinates before the fit.
+    refit_state : RefitState or None
+        What :meth:`Fitter.refit_without <wavestack.pipeline.fit.fitter.Fitter.refit_without>`
+        needs of this fit (its normal equations' sums and terms; no per-sample array); None where
+        the fit kept none (that refit then projects the frame again).
     """
 
     coefficients: NDArray[np.float64]
@@ -199,3 +204,4 @@ class FitResult:
     residual_map: NDArray[np.float64] | None = None
     circle_coefficients: NDArray[np.float64] | None = None
     removed: PhysicalTerms | None = None
+    refit_state: RefitState | None = field(default=None, repr=False, compare=False)

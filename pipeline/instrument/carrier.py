@@ -56,10 +56,10 @@ class CarrierProcessor(InterferometerProcessor):
     METHOD = "carrier"
 
     def __init__(self, settings: InterferometerSettings, fitters: FitterSource, *,
-                 mask: NDArray[np.bool_] | None = None) -> None:
+                 mask: NDArray[np.bool_] | None = None, residual_map: bool = False) -> None:
         if settings.carrier_refresh_sets < 1:
             raise ValueError(f"carrier_refresh_sets: expected at least 1, got {settings.carrier_refresh_sets}")
-        super().__init__(settings, fitters, mask=mask)
+        super().__init__(settings, fitters, mask=mask, residual_map=residual_map)
         self._carrier: tuple[float, float] | None = None  # sideband frequency, cycles/px, as carrier_phase takes it
         self._carrier_age = 0
 

@@ -129,6 +129,10 @@ class InterferometerProcessor:
         Builds (or hands out) the fitter of each aperture.
     mask : ndarray of bool, optional
         A user's aperture, full resolution (``settings.aperture`` is then not used).
+    residual_map : bool
+        Keep the residual map of a fit that spike clipping refitted (``analyze`` draws and saves
+        it; one more pass over the fitter's operator). Its RMS and PV are given either way; the
+        first fit's map is always kept.
 
     Raises
     ------
@@ -140,11 +144,12 @@ class InterferometerProcessor:
     METHOD = ""
 
     def __init__(self, settings: InterferometerSettings, fitters: FitterSource, *,
-                 mask: NDArray[np.bool_] | None = None) -> None:
+                 mask: NDArray[np.bool_] | None = None, residual_map: bool = False) -> None:
         if settings.method != self.METHOD:
             raise ValueError(f"method: {type(self).__name__} measures method {self.METHOD!r}, got {settings.method!r}")
         self.settings = settings
         self.fitters = fitters
+        self._residual_map = residual_map
         self._keeper = ApertureKeeper(settings, fitters, mask)
         prefilter_px = settings.unwrap_prefilter_px / settings.fit_decimation  # full-resolution pixels
         self._unwrapper = TemporalUnwrapper(max_residues=settings.max_residues,
@@ -295,7 +300,7 @@ class InterferometerProcessor:
             tick = time.perf_counter()
             try:
                 fit, clipped = clip_spikes(prepared.choice.fitter, prepared.to_fit, prepared.flags, fit,
-                                           self.settings.clip_sigma)
+                                           self.settings.clip_sigma, residual=self._residual_map)
             except InvalidFrame as error:
                 fit, clipped = error, 0
             if clipped and prepared.waves is not prepared.to_fit:

@@ -4,12 +4,14 @@
   ``clip_sigma`` times the residual RMS are left out (marked :data:`~.quality.CLIPPED`) and the fit
   repeated. One cut is not enough: a few large spikes inflate the RMS they are judged by. So the
   cut is iterated on the residual (the limit from the RMS of the pixels still kept, until no more
-  exceed it: a compiled walk per round) and the fit repeated once, for the whole set. The refit
-  moves the residual by a hair (leaving ~60 of 140,000 pixels out moves the coefficients by
-  2e-5 waves RMS on the default station), so a pixel or two the refit leaves just past its own,
-  slightly smaller limit stay: the residual PV stays within ~2 ``clip_sigma`` RMS, and a second
-  refit, as expensive as the first, would chase a hair. With no spike the cut is one compiled
-  pass over the residual and nothing is refitted.
+  exceed it: a compiled walk per round) and the fit repeated once, for the whole set, as a
+  downdate of the first fit (:meth:`Fitter.refit_without <wavestack.pipeline.fit.Fitter.refit_without>`:
+  the clipped samples' rows taken out of its normal equations, the full refit's numbers to
+  rounding, no pass over the map or the operator). The refit moves the residual by a hair
+  (leaving ~60 of 140,000 pixels out moves the coefficients by 2e-5 waves RMS on the default
+  station), so a pixel or two the refit leaves just past its own, slightly smaller limit stay:
+  the residual PV stays within ~2 ``clip_sigma`` RMS, and a second round would chase a hair.
+  With no spike the cut is one compiled pass over the residual and nothing is refitted.
 * **PV** of the map less the physical terms the fit removed (piston and tilt, or power too), over
   the pixels used: what an optician reads as the map's peak to valley.
 * **PVr** (Evans' robust PV) is the surface topic's :class:`~wavestack.pipeline.surface.RobustPVAnalyzer`,
@@ -33,6 +35,7 @@ from numpy.typing import NDArray
 from ..fit import FitResult, Fitter, IllConditionedBasis, InvalidFrame
 from ..fit import PhysicalTerms
 from ..surface import RobustPVAnalyzer, measured_area
+from .quality import CLIPPED
 
 __all__ = ["MapStatistics", "clip_spikes", "map_pv", "pvr_analyzer", "robust_pv"]
 
@@ -66,7 +69,7 @@ class MapStatistics:
 
 
 def clip_spikes(fitter: Fitter, waves: NDArray[np.float64], flags: NDArray[np.uint8], fit: FitResult,
-                sigma: float) -> tuple[FitResult, int]:
+                sigma: float, *, residual: bool = False) -> tuple[FitResult, int]:
     """Leave out the residual's spikes and refit (module notes); ``waves`` and ``flags`` are updated in place.
 
     Parameters
@@ -80,11 +83,15 @@ def clip_spikes(fitter: Fitter, waves: NDArray[np.float64], flags: NDArray[np.ui
         ``fitter``'s fit of ``waves`` with its residual map.
     sigma : float
         The limit, in residual RMS (> 0); never below :data:`SPIKE_FLOOR`.
+    residual : bool
+        Give the refit's residual map too (one pass over the fitter's operator); its residual RMS
+        and peak-to-valley are given either way.
 
     Returns
     -------
     (FitResult, int)
-        The refit (with its residual map), or ``fit`` when nothing was clipped, and the pixels clipped.
+        The refit (:meth:`Fitter.refit_without <wavestack.pipeline.fit.Fitter.refit_without>`), or
+        ``fit`` when nothing was clipped, and the pixels clipped.
 
     Raises
     ------
@@ -92,9 +99,12 @@ def clip_spikes(fitter: Fitter, waves: NDArray[np.float64], flags: NDArray[np.ui
         If clipping leaves too few samples to fit.
     """
     assert fit.residual_map is not None
-    clipped = _clip(fit.residual_map, sigma, SPIKE_FLOOR, waves, flags)
+    squares = fit.residual_rms ** 2 * fit.valid_count  # the residual map's own sum (a fit with its map)
+    clipped = _clip(fit.residual_map, squares, fit.valid_count, sigma, SPIKE_FLOOR, flags)
     if clipped:
-        fit = fitter.fit(waves, nan_policy="omit", residual=True)
+        spikes = (flags & CLIPPED) != 0
+        fit = fitter.refit_without(waves, fit, spikes, residual=residual)
+        waves[spikes] = np.nan
     return fit, clipped
 
 
@@ -137,31 +147,46 @@ def map_pv(waves: NDArray[np.float64], removed: PhysicalTerms | None) -> float:
 
 
 @numba.njit(nogil=True, cache=True)
-def _clip(residual, sigma, floor, waves, flags):  # type: ignore[no-untyped-def]
-    """Cut ``|residual| > max(sigma * rms, floor)``, the RMS over the pixels still kept, until no more
-    exceed; NaN into ``waves`` and the clipped flag there. Returns how many were cut."""
-    rows, cols = residual.shape
-    squares = 0.0
-    kept = 0
-    for r in range(rows):
-        for c in range(cols):
-            value = residual[r, c]
-            if value == value and waves[r, c] == waves[r, c]:
-                squares += value * value
-                kept += 1
+def _clip(residual, squares, kept, sigma, floor, flags):  # type: ignore[no-untyped-def]
+    """Cut ``|residual| > max(sigma * rms, floor)``, the RMS over the pixels still kept (``squares`` and
+    ``kept`` at first: the fit's), until no more exceed; the clipped flag on each pixel cut. Returns
+    how many were cut.
+
+    The first round walks the map and holds the pixels above half its limit; later rounds, whose
+    limits only fall, walk those alone while their limit stays above that half (else the map again).
+    """
+    flat = residual.ravel()
+    marks = flags.ravel()
+    held = np.empty(0, dtype=np.intp)
+    held_above = np.inf  # every kept pixel with |residual| above this is in ``held``
     count = 0
     while kept > 0:
-        limit = max(sigma * math.sqrt(squares / kept), floor)
+        limit = max(sigma * math.sqrt(max(squares, 0.0) / kept), floor)
         found = 0
-        for r in range(rows):
-            for c in range(cols):
-                value = residual[r, c]
-                if value == value and abs(value) > limit and waves[r, c] == waves[r, c]:
-                    waves[r, c] = np.nan
-                    flags[r, c] |= 8
+        if limit > held_above:
+            for i in held:
+                value = flat[i]
+                if abs(value) > limit and not marks[i] & 8:
+                    marks[i] |= 8
                     squares -= value * value
                     kept -= 1
                     found += 1
+        else:
+            held_above = 0.5 * limit
+            held = np.empty(flat.size, dtype=np.intp)
+            n_held = 0
+            for i in range(flat.size):
+                value = flat[i]
+                if value == value and abs(value) > held_above and not marks[i] & 8:
+                    if abs(value) > limit:
+                        marks[i] |= 8
+                        squares -= value * value
+                        kept -= 1
+                        found += 1
+                    else:
+                        held[n_held] = i
+                        n_held += 1
+            held = held[:n_held]
         if found == 0:
             break
         count += found

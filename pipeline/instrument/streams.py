@@ -29,11 +29,13 @@ __all__ = ["measure_map", "measure_set", "processor_for"]
 
 
 def processor_for(settings: InterferometerSettings, fitters: FitterSource, *,
-                  mask: NDArray[np.bool_] | None = None) -> PhaseShiftingProcessor | CarrierProcessor:
-    """The processor of ``settings.method``: phase shifting (``psi``) or the carrier method (``carrier``)."""
+                  mask: NDArray[np.bool_] | None = None, residual_map: bool = False
+                  ) -> PhaseShiftingProcessor | CarrierProcessor:
+    """The processor of ``settings.method``: phase shifting (``psi``) or the carrier method (``carrier``);
+    ``mask`` and ``residual_map`` as :class:`~.interferometer.InterferometerProcessor` takes them."""
     if settings.method == "carrier":
-        return CarrierProcessor(settings, fitters, mask=mask)
-    return PhaseShiftingProcessor(settings, fitters, mask=mask)
+        return CarrierProcessor(settings, fitters, mask=mask, residual_map=residual_map)
+    return PhaseShiftingProcessor(settings, fitters, mask=mask, residual_map=residual_map)
 
 
 def measure_set(frames: Sequence[NDArray[np.generic]], settings: InterferometerSettings, *,
@@ -68,7 +70,7 @@ def measure_set(frames: Sequence[NDArray[np.generic]], settings: InterferometerS
     >>> outcome.valid, outcome.method, outcome.quality.excluded
     (True, 'lsq', 0)
     """
-    processor = processor_for(settings, SyncFitterSource(settings.fit), mask=mask)
+    processor = processor_for(settings, SyncFitterSource(settings.fit), mask=mask, residual_map=True)
     return processor.process(list(frames))
 
 
@@ -110,7 +112,7 @@ def measure_map(waves: NDArray[np.floating], aperture: Aperture, measured: NDArr
     tick = time.perf_counter()
     fit = choice.fitter.fit(to_fit, nan_policy="omit", residual=True)
     if settings.clip_sigma is not None:
-        fit, _ = clip_spikes(choice.fitter, to_fit, flags, fit, settings.clip_sigma)
+        fit, _ = clip_spikes(choice.fitter, to_fit, flags, fit, settings.clip_sigma, residual=True)
     assert fit.residual_pv is not None
     pvr = robust_pv(pvr_analyzer(measured, settings.fit.remove, settings.fit.dtype), to_fit)
     statistics = MapStatistics(fit.residual_rms, fit.residual_pv, map_pv(to_fit, fit.removed), pvr)
