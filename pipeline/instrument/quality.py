@@ -30,9 +30,9 @@ never in a statistic. :class:`PixelQuality` counts them; the flags map says whic
 The counts are the instrument's, not the interferometer's: a Shack-Hartmann processor counts its
 lenslets (samples) the same way.
 
-Cost: one look at each frame's peak (a set that saturates nowhere needs nothing more; else the
-frames' maximum on the fit grid), two compiled walks over the fit grid (the signal, then the
-jumps) and, only when a jump was found, one labelling of the regions between them (OpenCV). See
+Cost: one compiled call walks the fit grid four times (the mean modulation; the signal marks,
+reading each frame at the grid's pixels; the jumps; the masked map) and, only when a jump was
+found, the regions between them are labelled (OpenCV) and the map masked again. See
 ``benchmarks/bench_live_numbers.py``.
 """
 
@@ -166,38 +166,27 @@ def mark_quality(phase: NDArray[np.float64], modulation: NDArray[np.floating], f
     (5, True)
     """
     flags = np.empty(adopted.shape, dtype=np.uint8)
-    _mark_signal(np.asarray(modulation), _saturated_on_grid(frames, step, adopted.shape, settings.saturation_counts),
-                 step, adopted, float(settings.min_modulation), flags)
-    if settings.check_fringe_order and _mark_jumps(phase, adopted, flags):
-        # the regions the jumps cut off: their order against the main body is not known
+    waves = np.empty(adopted.shape, dtype=np.float64)
+    full_scale = full_scale_of(frames, settings.saturation_counts)
+    looked_at = tuple(np.asarray(f) for f in frames)
+    if len({f.dtype for f in looked_at}) > 1:  # one compiled walk reads them all: one type
+        looked_at = tuple(f.astype(np.float64) for f in looked_at)
+    jumps = _mark(phase, np.asarray(modulation), looked_at, full_scale, step, adopted, float(settings.min_modulation),
+                  bool(settings.check_fringe_order), flags, waves)
+    if jumps:  # the regions the jumps cut off: their order against the main body is not known
         linked = ((adopted == 0) & ((flags & UNTRUSTED_ORDER) == 0)).view(np.uint8)
         count, labels = cv2.connectedComponents(linked, connectivity=4, ltype=cv2.CV_32S)
         _keep_main_regions(labels, count, components[0], components[1], flags)
-    waves = np.empty(adopted.shape, dtype=np.float64)
-    _masked_waves(phase, flags, waves)
+        _masked_waves(phase, flags, waves)
     return QualityMask(flags, waves)
 
 
-def _saturated_on_grid(frames: Sequence[NDArray[np.generic]], step: int, shape: tuple[int, int],
-                       saturation_counts: float | None) -> NDArray[np.bool_]:
-    """Where a frame of the set reaches full scale, on the fit grid; shape (0, 0) when no frame does anywhere.
-
-    The frames' peaks are looked at first (one contiguous pass each, SIMD): a set that saturates
-    nowhere, the common case, costs no walk over the grid.
-    """
-    full_scale = full_scale_of(frames, saturation_counts)
-    if not math.isfinite(full_scale) or all(np.asarray(f).max() < full_scale for f in frames):
-        return np.zeros((0, 0), dtype=np.bool_)
-    peak = np.asarray(frames[0])[::step, ::step].copy()
-    for frame in frames[1:]:
-        np.maximum(peak, np.asarray(frame)[::step, ::step], out=peak)
-    return np.ascontiguousarray(peak[: shape[0], : shape[1]] >= full_scale)
-
-
 @numba.njit(nogil=True, cache=True)
-def _mark_signal(modulation, saturated, step, adopted, fraction, flags):  # type: ignore[no-untyped-def]
-    """The adoption's marks, then low modulation and saturation (``saturated`` on the fit grid, or
-    empty: none); returns how many fitted pixels were marked."""
+def _mark(phase, modulation, frames, full_scale, step, adopted, fraction, check_order, flags, waves
+          ):  # type: ignore[no-untyped-def]
+    """The marks of one set in one compiled call: the adoption's, low modulation, saturation (a frame of
+    ``frames`` at full scale on the grid; none when that is infinite), the jumps; and, when no jump was
+    found, the masked map. Returns the pixels the jumps marked."""
     rows, cols = adopted.shape
     total = 0.0
     count = 0
@@ -207,20 +196,22 @@ def _mark_signal(modulation, saturated, step, adopted, fraction, flags):  # type
                 total += modulation[r * step, c * step]
                 count += 1
     level = fraction * total / max(count, 1)
-    check_saturation = saturated.shape[0] > 0
-    marked = 0
     for r in range(rows):
         for c in range(cols):
             mark = adopted[r, c]
             if mark == 0:
                 if modulation[r * step, c * step] < level:
                     mark |= 1
-                if check_saturation and saturated[r, c]:
-                    mark |= 2
-                if mark:
-                    marked += 1
+                if full_scale < np.inf:
+                    for k in range(len(frames)):
+                        if frames[k][r * step, c * step] >= full_scale:
+                            mark |= 2
+                            break
             flags[r, c] = mark
-    return marked
+    jumps = _mark_jumps(phase, adopted, flags) if check_order else 0
+    if jumps == 0:
+        _masked_waves(phase, flags, waves)
+    return jumps
 
 
 @numba.njit(nogil=True, cache=True)

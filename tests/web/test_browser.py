@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 
 from wavestack.config import DEFAULT_CONFIG
-from wavestack.web import COLOURS
+from wavestack.web import COLOURS, LEFT_OUT_COLOUR
 
 ROOT = Path(__file__).resolve().parents[2]
 ARTEFACT = ROOT / "build" / "test-artifacts" / "web-view.png"
@@ -95,14 +95,16 @@ _READ_PAGE = """() => {
 
 
 def _map_values(page_state: dict) -> np.ndarray:
-    """The map the page shows, back in waves: each pixel's colour looked up on the colour scale (NaN outside)."""
+    """The map the page shows, back in waves: each pixel's colour looked up on the colour scale (NaN outside, and
+    where the page paints a pixel the quality mask left out: that colour is no value)."""
     png = base64.b64decode(page_state["src"].split(",", 1)[1])
     bgra = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
     lut = np.array([[int(c[k:k + 2], 16) for k in (5, 3, 1)] for c in COLOURS], dtype=np.float64)  # BGR
     pixels = bgra[..., :3].reshape(-1, 1, 3).astype(np.float64)
     level = np.argmin(((pixels - lut[None]) ** 2).sum(axis=2), axis=1).reshape(bgra.shape[:2])
     values = page_state["vmin"] + level / 255.0 * (page_state["vmax"] - page_state["vmin"])
-    return np.where(bgra[..., 3] > 0, values, np.nan)
+    left_out = np.all(bgra[..., :3] == [int(LEFT_OUT_COLOUR[k:k + 2], 16) for k in (5, 3, 1)], axis=2)
+    return np.where((bgra[..., 3] > 0) & ~left_out, values, np.nan)
 
 
 def _result_of_map(page_state: dict) -> int:
@@ -129,14 +131,9 @@ def _check_numbers(page_state: dict, results: dict[int, dict]) -> None:
 
 
 def _drift_fit(change: np.ndarray) -> tuple[float, float]:
-    """Least squares of a map's change on a paraboloid (1, x, y, x^2 + y^2): (r^2 coefficient, variance explained).
-
-    Judged inside 95 % of the shown radius: the outermost ring of pixels (2-3 px here) carries the
-    phase method's edge error (up to a wave in a shown map), which the paraboloid is not about.
-    """
+    """Least squares of a map's change on a paraboloid (1, x, y, x^2 + y^2): (r^2 coefficient, variance explained),
+    over every shown pixel that holds a value in both maps (the whole shown radius)."""
     y, x = np.nonzero(np.isfinite(change))
-    inside = np.hypot(x - x.mean(), y - y.mean()) < 0.95 * np.hypot(x - x.mean(), y - y.mean()).max()
-    y, x = y[inside], x[inside]
     d = change[y, x]
     basis = np.column_stack([np.ones_like(d), x, y, (x - x.mean()) ** 2 + (y - y.mean()) ** 2])
     solution, *_ = np.linalg.lstsq(basis, d, rcond=None)

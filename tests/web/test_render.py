@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from fuzz import fuzz_settings
-from wavestack.web import COLOURS, downsample, render_map
+from wavestack.web import COLOURS, LEFT_OUT_COLOUR, downsample, render_map
 
 
 def _naive_block_means(values: np.ndarray, factor: int) -> np.ndarray:
@@ -79,3 +79,26 @@ def test_a_map_without_a_valid_pixel_is_an_empty_image() -> None:
     image = render_map(np.full((10, 10), np.nan), units="waves", title="none", seq=1)
     _, alpha = _decoded(image)
     assert not alpha.any() and image.outline == () and math.isnan(image.vmin) and math.isnan(image.rms)
+
+
+def test_a_pixel_the_quality_mask_left_out_is_painted_as_left_out_never_as_a_value() -> None:
+    # A ring of rim pixels clipped and a dropout inside: NaN in the map, flagged; the blocks holding
+    # them are the left-out colour (not a colour of the scale), and every other block is its mean.
+    y, x = np.mgrid[-1:1:120j, -1:1:120j]
+    inside = x**2 + y**2 < 0.9
+    flags = np.where(inside, 0, 128).astype(np.uint8)
+    rim = inside & (x**2 + y**2 > 0.85) & (x > 0.3)  # part of the outermost ring, as spike clipping leaves it
+    flags[rim] |= 8
+    flags[60:63, 40:43] |= 1  # a dropout of low modulation
+    values = np.where(inside & (flags == 0), 3.0 * (x**2 + y**2), np.nan)
+    image = render_map(values, units="waves", title="test", seq=1, max_side=40, flags=flags)
+    bgra = cv2.imdecode(np.frombuffer(image.png, np.uint8), cv2.IMREAD_UNCHANGED)
+    painted = np.all(bgra[..., :3] == [int(LEFT_OUT_COLOUR[k:k + 2], 16) for k in (5, 3, 1)], axis=2)
+    marked = downsample(((flags != 0) & (flags != 128)).astype(np.float64), image.factor) > 0
+    assert image.left_out == int(rim.sum()) + 9
+    assert np.array_equal(painted, marked) and (bgra[painted, 3] == 255).all()
+    assert LEFT_OUT_COLOUR not in COLOURS
+    shown, alpha = _decoded(image)
+    means = downsample(values, image.factor)
+    step = (image.vmax - image.vmin) / 255
+    assert np.nanmax(np.abs(shown - means)[(alpha > 0) & ~painted]) <= step / 2 + 1e-12

@@ -10,7 +10,7 @@ for itself only (:class:`LatestSlot`). Maps are rendered on the server's thread 
 from __future__ import annotations
 
 from wavestack.web.feed import LiveFeed, station_panel
-from wavestack.web.render import COLOURS, downsample, render_map
+from wavestack.web.render import COLOURS, LEFT_OUT_COLOUR, downsample, render_map
 from wavestack.web.server import WebViewServer
 from wavestack.web.slots import LatestSlot
 from wavestack.web.view import (
@@ -23,6 +23,6 @@ from wavestack.web.view import (
     update_message,
 )
 
-__all__ = ["BrowserCounts", "COLOURS", "Coefficient", "HistoryPanel", "LatestSlot", "LiveFeed", "LiveUpdate",
+__all__ = ["BrowserCounts", "COLOURS", "Coefficient", "LEFT_OUT_COLOUR", "HistoryPanel", "LatestSlot", "LiveFeed", "LiveUpdate",
            "MapImage", "StationPanel", "WebViewServer", "downsample", "render_map", "station_panel",
            "update_message"]
