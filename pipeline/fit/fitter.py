@@ -37,10 +37,10 @@ from .moment_projection import MomentProjection
 from .normal_equations import NormalEquations, SolvedFrame
 from .operator_projection import OperatorProjection
 from .physical_terms import terms_from_vector
-from .projection import Projected, check_frame, check_frames
-from .results import FitBasis, FitResult, FitterDiagnostics, InvalidFrame, NanPolicy
+from .projection import Projected, check_frames
+from .results import FitBasis, FitResult, FitterDiagnostics, NanPolicy
 from .run_refit import RunFit, RunRefit
-from .sample_removal import RefitState, dropped_samples, residual_figures, without_samples
+from .sample_removal import refit_state, refit_without
 
 if TYPE_CHECKING:  # only for annotations: the fitter does not need the map's modules
     from ..mapping import CanonicalMap
@@ -252,11 +252,6 @@ class Fitter:
 
     def _finish(self, frame: NDArray, projected: Projected, residual: bool) -> FitResult:
         """Solve the normal equations of a projected frame and make its result."""
-        solved, n_valid = self._solve(projected)
-        return self._result(solved, frame, projected, n_valid, residual)
-
-    def _solve(self, projected: Projected) -> tuple[SolvedFrame, int]:
-        """The solution of a projected frame's normal equations, and the samples they hold."""
         equations = self._equations
         if projected.downdate is not None:
             equations = equations.without(projected.downdate)
@@ -266,7 +261,8 @@ class Fitter:
         step = centre - projected.shift
         product = projected.product - step * equations.column_sums
         squares = projected.squares - 2.0 * step * projected.total + n_valid * step * step
-        return equations.solve(product, squares, centre), n_valid
+        solved = equations.solve(product, squares, centre)
+        return self._result(solved, frame, projected, n_valid, residual)
 
     def refit_without(
         self,
@@ -278,12 +274,10 @@ class Fitter:
     ) -> FitResult:
         """Refit a frame without some of the samples a fit of it used: a rank-k downdate of that fit.
 
-        The same result as fitting the frame with the dropped samples set to NaN
-        (``nan_policy="omit"``), to rounding (float64: ~1e-15 waves on 140,000 samples), at the
-        cost of k operator rows and an (M + k)-sized solve: no pass over the frame or the
-        operator (:mod:`wavestack.pipeline.fit.sample_removal`). The residual RMS and
-        peak-to-valley are exact, taken from ``fit``'s residual map; the new residual map (one
-        pass over the operator) only when asked for.
+        The result of fitting the frame with the dropped samples NaN (``nan_policy="omit"``), to
+        rounding, from k operator rows and an (M + k)-sized solve: no pass over the frame or the
+        operator; the residual RMS and PV exact, the residual map (one pass) on request
+        (:mod:`wavestack.pipeline.fit.sample_removal`).
 
         Parameters
         ----------
@@ -299,8 +293,7 @@ class Fitter:
         Returns
         -------
         FitResult
-            ``nan_count`` counts the samples the first fit omitted and the dropped ones;
-            ``residual_pv`` is always given.
+            Its ``nan_count`` counts the first fit's omitted samples and the dropped ones.
 
         Raises
         ------
@@ -327,37 +320,8 @@ class Fitter:
         if fit.basis != self.basis:
             raise ValueError(f"fit: expected a fit by this fitter ({self.basis.method}, {self.n_modes} modes), "
                              f"got one by {fit.basis.method} with {len(fit.basis.modes)} modes")
-        frame = check_frame(frame, self._projection.shape)
-        pixels, dropped_residual = dropped_samples(fit, dropped)
-        if pixels.size == 0:
-            return fit
-        state = fit.refit_state
-        if state is None:  # a fit of the one-call refit keeps no sums: the projection gives them again
-            projected = self._projection.project(frame, "omit")
-            solved, _ = self._solve(projected)
-            state = RefitState.of(projected, np.concatenate([solved.basis, solved.removed]))
-        rows = self._projection.rows_at(pixels)
-        values = frame.reshape(-1)[pixels].astype(np.float64)
-        projected = without_samples(state.projected, rows, values)
-        if self._equations.n_samples - projected.downdate.count <= self._projection.n_columns:  # type: ignore[union-attr]
-            raise InvalidFrame(f"dropped: leaving out {pixels.size} more samples leaves "
-                               f"{fit.valid_count - pixels.size}; expected more than the "
-                               f"{self._projection.n_columns} fitted terms")
-        solved, n_valid = self._solve(projected)
-        result = self._result(solved, frame, projected, n_valid, residual=False)
-        change = result.refit_state.terms - state.terms  # type: ignore[union-attr]
-        if residual:
-            residual_map = fit.residual_map - self._projection.evaluate(change)  # type: ignore[operator]
-            residual_map[dropped] = np.nan
-            squares = float(np.nansum(np.square(residual_map)))
-            peak_to_valley = float(np.nanmax(residual_map)) - float(np.nanmin(residual_map))
-        else:
-            residual_map = None
-            squares, peak_to_valley = residual_figures(
-                state=state, base=self._equations, fit=fit, rows=rows, dropped_residual=dropped_residual,
-                change=change, bound=self._projection.change_bound, dropped=dropped, rows_at=self._projection.rows_at)
-        return dataclasses.replace(result, residual_rms=math.sqrt(squares / n_valid), residual_pv=peak_to_valley,
-                                   residual_map=residual_map)
+        return refit_without(frame, fit, dropped, residual, columns=self._projection, equations=self._equations,
+                             solved_result=lambda frame, projected: self._finish(frame, projected, False))
 
     def surface(self, coefficients: NDArray[np.floating]) -> NDArray[np.float64]:
         """Reconstruct the map a coefficient vector describes on this aperture.
@@ -493,5 +457,5 @@ class Fitter:
             residual_map=residual_map,
             circle_coefficients=circle,
             removed=removed,
-            refit_state=RefitState.of(projected, terms),
+            refit_state=refit_state(projected, terms),
         )

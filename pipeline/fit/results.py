@@ -18,7 +18,6 @@ from .physical_terms import PhysicalTerms
 
 if TYPE_CHECKING:  # only for annotations: the results do not need the map's modules
     from ..mapping import CanonicalMap
-    from .sample_removal import RefitState
 
 
 NanPolicy = Literal["raise", "omit"]
@@ -164,6 +163,38 @@ class FitterDiagnostics:
         return values
 
 
+@dataclass(frozen=True, eq=False)
+class RefitState:
+    """What a fit's normal equations were made of, kept so that it can be refitted without some samples
+    (:mod:`~wavestack.pipeline.fit.sample_removal`); sizes of the terms, no per-sample array.
+
+    Attributes
+    ----------
+    product : ndarray, shape (K,)
+        ``A^T (w - shift)`` over the samples the fit used.
+    squares, total : float
+        ``|w - shift|^2`` and ``sum(w - shift)`` over them.
+    shift : float
+        The constant taken off every sample before the sums.
+    dropped_gram : ndarray, shape (K, K), or None
+        ``A^T A`` of the samples the fit left out (non-finite), None when it left none out.
+    dropped_sums : ndarray, shape (K,), or None
+        ``A^T 1`` of the same samples.
+    dropped_count : int
+    terms : ndarray, shape (K,)
+        The solved terms: basis, then removed physical terms, in the stored orthonormal columns.
+    """
+
+    product: NDArray[np.float64]
+    squares: float
+    total: float
+    shift: float
+    dropped_gram: NDArray[np.float64] | None
+    dropped_sums: NDArray[np.float64] | None
+    dropped_count: int
+    terms: NDArray[np.float64]
+
+
 @dataclass(frozen=True)
 class FitResult:
     """The fit of one frame.
@@ -191,8 +222,7 @@ class FitResult:
         Piston, tilt (and power) removed in physical coordinates before the fit.
     refit_state : RefitState or None
         What :meth:`Fitter.refit_without <wavestack.pipeline.fit.fitter.Fitter.refit_without>`
-        needs of this fit (its normal equations' sums and terms; no per-sample array); None where
-        the fit kept none (that refit then projects the frame again).
+        needs of this fit; None where the fit kept none (that refit then projects the frame again).
     """
 
     coefficients: NDArray[np.float64]

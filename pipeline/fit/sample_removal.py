@@ -1,6 +1,6 @@
 """A fit refitted without some of its samples, by a rank-k downdate: no pass over the frame or the operator.
 
-A fit keeps what its normal equations were made of (:class:`RefitState`): ``b = A_U^T (w_U - s)``,
+A fit keeps what its normal equations were made of (:class:`~.results.RefitState`): ``b = A_U^T (w_U - s)``,
 ``|w_U - s|^2``, ``sum(w_U - s)`` over the samples ``U`` it used, the samples it had already
 dropped (their share of ``A^T A``), and its terms ``t`` (basis and removed physical terms, in the
 stored orthonormal columns). Leaving out k more samples ``S`` (rows ``R = A_S``, values ``w_S``) is
@@ -33,41 +33,88 @@ Computations*, 4th ed., section 6.5); the residual update is the same algebra as
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Protocol
 
 import numba
 import numpy as np
 from numpy.typing import NDArray
 
 from .normal_equations import NormalEquations
-from .projection import Downdate, Projected
-from .results import FitResult
+from .projection import Downdate, Projected, check_frame
+from .results import FitResult, InvalidFrame, NanPolicy, RefitState
 
-__all__ = ["RefitState", "dropped_samples", "ChangeBound", "residual_figures", "without_samples"]
+__all__ = ["ChangeBound", "SampledColumns", "refit_state", "refit_without"]
 
 
-@dataclass(frozen=True, eq=False)
-class RefitState:
-    """What a fit's normal equations were made of, kept so that it can be refitted without some samples.
+def refit_state(projected: Projected, terms: NDArray[np.float64]) -> RefitState:
+    """The state a fit keeps: its projection's sums (no per-sample arrays) and its terms."""
+    dropped = projected.downdate
+    return RefitState(projected.product, projected.squares, projected.total, projected.shift,
+                      None if dropped is None else dropped.gram, None if dropped is None else dropped.column_sums,
+                      0 if dropped is None else dropped.count, terms)
 
-    Attributes
-    ----------
-    projected : Projected
-        The frame's sums over the samples the fit used (no per-sample arrays).
-    terms : ndarray, shape (M + k,)
-        The solved terms: basis, then removed physical terms, in the stored orthonormal columns.
-    """
 
-    projected: Projected
-    terms: NDArray[np.float64]
+def _projected_of(state: RefitState) -> Projected:
+    dropped = None
+    if state.dropped_gram is not None and state.dropped_sums is not None:
+        dropped = Downdate(state.dropped_gram, state.dropped_sums, state.dropped_count)
+    return Projected(state.product, state.squares, state.total, state.shift, dropped)
 
-    @classmethod
-    def of(cls, projected: Projected, terms: NDArray[np.float64]) -> RefitState:
-        """The state of a fit, its projection's per-sample arrays left out (they are not needed)."""
-        if projected.centred is not None or projected.bad is not None:
-            projected = dataclasses.replace(projected, centred=None, bad=None)
-        return cls(projected, terms)
+
+class SampledColumns(Protocol):
+    """What the refit needs of a fitter's projection: its frame shape and columns, their rows and bound,
+    their values for given terms, a frame's sums."""
+
+    shape: tuple[int, int]
+    n_columns: int
+
+    def rows_at(self, pixels: NDArray[np.intp]) -> NDArray[np.float64]: ...
+
+    @property
+    def change_bound(self) -> ChangeBound: ...
+
+    def evaluate(self, terms: NDArray[np.float64]) -> NDArray[np.float64]: ...
+
+    def project(self, frame: NDArray, nan_policy: NanPolicy) -> Projected: ...
+
+
+def refit_without(frame: NDArray[np.floating], fit: FitResult, dropped: NDArray[np.bool_], residual: bool, *,
+                  columns: SampledColumns, equations: NormalEquations,
+                  solved_result: Callable[[NDArray, Projected], FitResult]) -> FitResult:
+    """:meth:`Fitter.refit_without <wavestack.pipeline.fit.fitter.Fitter.refit_without>` (module notes), given
+    the fitter's projection, its normal equations and how it makes a result (without its residual map)."""
+    frame = check_frame(frame, columns.shape)
+    pixels, dropped_residual = dropped_samples(fit, dropped)
+    if pixels.size == 0:
+        return fit
+    state = fit.refit_state
+    if state is None:  # a fit of the one-call refit keeps no sums: the projection gives them again
+        state = solved_result(frame, columns.project(frame, "omit")).refit_state
+        assert state is not None
+    rows = columns.rows_at(pixels)
+    projected = without_samples(_projected_of(state), rows, frame.reshape(-1)[pixels].astype(np.float64))
+    assert projected.downdate is not None
+    if equations.n_samples - projected.downdate.count <= columns.n_columns:
+        raise InvalidFrame(f"dropped: leaving out {pixels.size} more samples leaves {fit.valid_count - pixels.size}; "
+                           f"expected more than the {columns.n_columns} fitted terms")
+    result = solved_result(frame, projected)
+    assert result.refit_state is not None and fit.residual_map is not None
+    change = result.refit_state.terms - state.terms
+    residual_map = None
+    if residual:
+        residual_map = fit.residual_map - columns.evaluate(change)
+        residual_map[dropped] = np.nan
+        squares = float(np.nansum(np.square(residual_map)))
+        peak_to_valley = float(np.nanmax(residual_map)) - float(np.nanmin(residual_map))
+    else:
+        squares, peak_to_valley = residual_figures(
+            state=state, base=equations, fit=fit, rows=rows, dropped_residual=dropped_residual,
+            change=change, bound=columns.change_bound, dropped=dropped, rows_at=columns.rows_at)
+    return dataclasses.replace(result, residual_rms=math.sqrt(squares / result.valid_count), residual_pv=peak_to_valley,
+                               residual_map=residual_map)
 
 
 def dropped_samples(fit: FitResult, dropped: NDArray[np.bool_]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
@@ -145,14 +192,13 @@ def residual_figures(*, state: RefitState, base: NormalEquations, fit: FitResult
     ``rows_at(pixels)`` gives the operator rows (float64) of flat pixel indices; ``bound`` is the
     operator's :class:`ChangeBound`.
     """
-    projected = state.projected
     assert fit.residual_map is not None
     used_gram, used_sums = base.gram, base.column_sums
-    if projected.downdate is not None:
-        used_gram = used_gram - projected.downdate.gram
-        used_sums = used_sums - projected.downdate.column_sums
+    if state.dropped_gram is not None and state.dropped_sums is not None:
+        used_gram = used_gram - state.dropped_gram
+        used_sums = used_sums - state.dropped_sums
     # A_U^T r_U from the normal equations of the fit, then the dropped samples taken out of it.
-    normal_residual = projected.product + projected.shift * used_sums - used_gram @ state.terms
+    normal_residual = state.product + state.shift * used_sums - used_gram @ state.terms
     kept_product = normal_residual - rows.T @ dropped_residual
     kept_gram = used_gram - rows.T @ rows
     squares = (fit.residual_rms ** 2 * fit.valid_count - float(dropped_residual @ dropped_residual)
