@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..shack_hartmann import LensletLattice, ModalReconstructor, SpotMeasurement, convert_slopes, lit_lenslets, slopes
 from ..shack_hartmann.lit import TYPICAL_SPOT_PERCENTILE
-from ..zernike import mode_list
+from ..zernike import mode_list, zernike_basis
 from .lenslet_geometry import LensletGeometry, lenslet_geometry
 from .records import ApertureRecord, ReconstructorDiagnostics
 from .sensor_setup import ShackHartmannSetup
@@ -102,6 +102,9 @@ class SlopeOutcome:
         RMS of the slope misfit times the pitch: waves of wavefront across one lenslet (NaN when none).
     residual_pv : float
         Peak-to-valley of the same misfit (both slope components) times the pitch, waves (NaN when none).
+    pv : float
+        Peak-to-valley of the reconstructed wavefront less piston and tilt, at the lit lenslets'
+        centres (the points the sensor samples), waves (NaN when none).
     diagnostics : ReconstructorDiagnostics or None
     aperture_record : ApertureRecord or None
         The lit-lenslet set the result records as its aperture.
@@ -122,6 +125,7 @@ class SlopeOutcome:
     coefficients_waves: NDArray[np.float64] | None = None
     residual_rms: float = math.nan
     residual_pv: float = math.nan
+    pv: float = math.nan
     diagnostics: ReconstructorDiagnostics | None = None
     aperture_record: ApertureRecord | None = None
     aperture_changed: bool = False
@@ -139,8 +143,9 @@ class SlopeOutcome:
 
     @property
     def statistics(self) -> MapStatistics:
-        """The residual's RMS and PV; the wavefront's PV and PVr are not computed from slopes yet (NaN)."""
-        return MapStatistics(self.residual_rms, self.residual_pv, math.nan, math.nan)
+        """The residual's RMS and PV and the wavefront's PV; no PVr (NaN): Evans' robust PV adds three
+        times a measured map's residual RMS to its fit's PV, and slopes give no map."""
+        return MapStatistics(self.residual_rms, self.residual_pv, self.pv, math.nan)
 
 
 @dataclass(frozen=True, eq=False)
@@ -331,7 +336,8 @@ class ShackHartmannProcessor:
         pitch = geometry.lattice.pitch_px
         timings["reconstruct"] = time.perf_counter() - tick
         return SlopeOutcome(True, None, coefficients, residual_rms=float(np.sqrt(np.mean(misfit ** 2))) * pitch,
-                            residual_pv=float(misfit.max() - misfit.min()) * pitch, diagnostics=diagnostics,
+                            residual_pv=float(misfit.max() - misfit.min()) * pitch,
+                            pv=_wavefront_pv(geometry, lit, self._modes, coefficients), diagnostics=diagnostics,
                             aperture_changed=changed, aperture_record=record, **common)
 
     # ------------------------------------------------------------------ stages
@@ -388,3 +394,16 @@ class ShackHartmannProcessor:
         built = ModalReconstructor.for_circle(geometry.lattice.centres_xy(), (cx, -cy), radius, self._modes, lit)
         logger.debug("modal reconstructor for %d lit lenslets (condition %.3g)", int(lit.sum()), built.condition)
         return built
+
+
+def _wavefront_pv(geometry: LensletGeometry, lit: NDArray[np.bool_], modes: Sequence[tuple[int, int]],
+                  coefficients: NDArray[np.float64]) -> float:
+    """PV of the modal wavefront less piston and tilt (radial order <= 1) at the lit lenslets' centres, waves."""
+    cx, cy, radius = geometry.pupil_px
+    centres = geometry.lattice.centres()[lit]  # (col, row), pixels
+    higher = [k for k, (n, _) in enumerate(modes) if n >= 2]
+    if not higher or centres.shape[0] == 0:
+        return math.nan
+    values = zernike_basis([modes[k] for k in higher], (centres[:, 0] - cx) / radius,
+                           (cy - centres[:, 1]) / radius) @ coefficients[higher]
+    return float(values.max() - values.min())

@@ -108,10 +108,12 @@ class StationResult:
         RMS); NaN when invalid.
     pv : float
         Peak-to-valley of the measured wavefront less the removed physical terms (piston, tilt),
-        waves, over the pixels used; NaN when invalid or not computed.
+        waves, over the pixels used (Shack-Hartmann: of the modal reconstruction less piston and
+        tilt at the lit lenslets' centres); NaN when invalid or not computed.
     pvr : float
         Evans' robust PV: the PV of the 36-term Fringe Zernike fit of the same map plus three
-        times that fit's residual RMS, waves; NaN when invalid or not computed.
+        times that fit's residual RMS, waves; NaN when invalid or not computed, and always for a
+        Shack-Hartmann sensor (slopes give no measured map).
     quality : PixelQuality or None
         What the data-quality mask left out inside the aperture (``inside``, ``used``,
         ``excluded``, ``low_modulation``, ``saturated``, ``untrusted_order``, ``clipped``).
