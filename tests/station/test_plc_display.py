@@ -9,6 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from plc_panel import read_panel
 from pymodbus.client import ModbusTcpClient
 
 from wavestack.config import load_station_config
@@ -17,19 +18,6 @@ from wavestack.station import CycleRecord, StationResult
 SMALL = Path(__file__).resolve().parents[1] / "configs" / "station-small.toml"
 SPEC = "3/1(0.5/0.2)"
 LIMITING_CODES = {"SAG": 1, "IRR": 2, "RSI": 3, "RMSt": 4, "RMSi": 5, "RMSa": 6}  # docs/instruments.md
-
-
-def _read_panel(client: ModbusTcpClient, address: int) -> dict[str, object]:
-    """The block as the PLC's HMI reads it: FC3, pymodbus's float32 converter (CDAB = little word order)."""
-    reply = client.read_holding_registers(address, count=8, device_id=1)
-    assert not reply.isError(), reply
-    words = reply.registers
-
-    def real(pair: list[int]) -> float:
-        return float(ModbusTcpClient.convert_from_registers(pair, ModbusTcpClient.DATATYPE.FLOAT32,
-                                                            word_order="little"))
-    return {"counter": words[0], "valid": bool(words[1] & 1), "figures": bool(words[1] & 2),
-            "rms_nm": real(words[2:4]), "pvr_nm": real(words[4:6]), "spec": words[6], "limiting": words[7]}
 
 
 def test_the_panel_shows_each_result_as_the_station_made_it(station_factory) -> None:
@@ -50,7 +38,7 @@ def test_the_panel_shows_each_result_as_the_station_made_it(station_factory) -> 
     seen: list[tuple[StationResult, dict[str, object]]] = []
 
     def on_result(record: CycleRecord) -> None:
-        seen.append((record.result, _read_panel(client, address)))  # after the cycle's writes, before the next
+        seen.append((record.result, read_panel(client, address)))  # after the cycle's writes, before the next
         if record.result.index == 3:
             camera.unplug()
             replug.start()
@@ -61,7 +49,7 @@ def test_the_panel_shows_each_result_as_the_station_made_it(station_factory) -> 
         replug.cancel()
         replug.join()
     try:
-        after = _read_panel(client, address)
+        after = read_panel(client, address)
     finally:
         client.close()
     assert after == seen[-1][1]  # the panel keeps the last result after the run

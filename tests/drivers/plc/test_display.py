@@ -16,6 +16,7 @@ import pytest
 from fuzz import fuzz_settings
 from hypothesis import given
 from hypothesis import strategies as st
+from plc_panel import read_panel
 from pymodbus.client import ModbusTcpClient
 
 from wavestack.drivers import ProtocolError
@@ -57,19 +58,6 @@ def plc(watchdog_timeout_s: float = 60.0) -> Iterator[tuple[PlcSimulator, Polish
                 yield sim, link, client
             finally:
                 client.close()
-
-
-def read_as_a_third_party(client: ModbusTcpClient) -> dict[str, object]:
-    """The block as an HMI reads it: FC3, and pymodbus's float32 converter (CDAB = little word order)."""
-    reply = client.read_holding_registers(DISPLAY, count=8, device_id=1)
-    assert not reply.isError(), reply
-    words = reply.registers
-
-    def real(pair: list[int]) -> float:
-        return float(ModbusTcpClient.convert_from_registers(pair, ModbusTcpClient.DATATYPE.FLOAT32,
-                                                            word_order="little"))
-    return {"counter": words[0], "flags": words[1], "rms_nm": real(words[2:4]), "pvr_nm": real(words[4:6]),
-            "spec": words[6], "limiting": words[7]}
 
 
 # ----------------------------------------------------------------------------- the encoding (pure)
@@ -140,12 +128,12 @@ def test_the_owner_writes_it_and_a_third_party_reads_the_same_values() -> None:
     with plc() as (_, link, client):
         link.heartbeat(timeout_s=1.0)
         link.show_result(SHOWN, timeout_s=1.0)
-        seen = read_as_a_third_party(client)
+        seen = read_panel(client, DISPLAY)
         assert seen["counter"] == SHOWN.result_index % 65536 and seen["flags"] == 0b11
         assert seen["rms_nm"] == pytest.approx(3.21, rel=1e-6) and seen["pvr_nm"] == pytest.approx(45.6, rel=1e-6)
         assert (seen["spec"], seen["limiting"]) == (2, LIMITING_QUANTITIES.index("RSI"))
         link.show_result(invalid_display(SHOWN.result_index + 1, has_spec=True), timeout_s=1.0)
-        seen = read_as_a_third_party(client)
+        seen = read_panel(client, DISPLAY)
         assert seen["flags"] & 1 == 0 and seen["spec"] == int(SpecCode.NOT_JUDGED) and seen["rms_nm"] == 0.0
 
 
@@ -170,7 +158,7 @@ def test_a_tripped_watchdog_clears_the_panel_and_refuses_the_write() -> None:
     with plc(watchdog_timeout_s=0.2) as (sim, link, client):
         link.heartbeat(timeout_s=1.0)
         link.show_result(SHOWN, timeout_s=1.0)
-        assert read_as_a_third_party(client)["flags"] == 0b11
+        assert read_panel(client, DISPLAY)["flags"] == 0b11
         deadline = time.monotonic() + 10.0  # a bound on the wait, never a timing assertion
         while sim.watchdog_state is not WatchdogState.TRIPPED and time.monotonic() < deadline:
             time.sleep(0.05)
