@@ -45,7 +45,7 @@ from numpy.typing import ArrayLike
 
 from wavestack.drivers.errors import DeviceTimeout, ProtocolError
 from wavestack.drivers.plc.commands import CommandLedger, CommandLimits, CommandRefused
-from wavestack.drivers.plc.display import ResultDisplay
+from wavestack.drivers.plc.display import ResultDisplay, decode_display
 from wavestack.drivers.plc.gate import (HeartbeatEchoStale, PlcNotReady, command_refusal, decode_self_check,
                                        no_scan_since, not_ready)
 from wavestack.drivers.plc.heartbeat import HostHeartbeat, new_token
@@ -295,6 +295,27 @@ class PolishingLink(HostHeartbeat, JobControl, RawAccess):
                 raise ProtocolError(self._device, "a monitor link writes no display block (the station owns it)")
             self._transport.ensure_connected(deadline)
             self._write(block.start, registers, block.write_function or 16, deadline)
+
+    def read_display(self, timeout_s: float) -> ResultDisplay | None:
+        """The result the machine's panel shows (any link may read it); None when the map has no display block.
+
+        Raises
+        ------
+        PlcRefused
+            4 while the watchdog is tripped (the PLC answers nothing else).
+        ProtocolError
+            The block holds a code outside the code tables.
+        """
+        block = self._map.display
+        if block is None or block.word_order is None:
+            return None
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            registers = self._read_block(block, deadline)
+        try:
+            return decode_display(registers, block.word_order)
+        except ValueError as error:
+            raise ProtocolError(self._device, f"{error} (registers {block.start}-{block.stop - 1})") from None
 
     def read_status(self, timeout_s: float) -> PlcStatus:
         """The status block; a tripped watchdog (exception 4) is reported as ``watchdog_tripped``."""
