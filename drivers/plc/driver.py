@@ -15,6 +15,8 @@ pymodbus ``ModbusTcpClient``) and adds what a closed loop needs from a PLC link:
 - command limits (:class:`CommandLimits`: ``|removal|`` and the step from the held command), checked
   before the wire (:class:`CommandRefused`); :meth:`PolishingLink.restrict` only tightens them;
 - jobs (:mod:`.job_control`): read the machine block, load and start a job file, behind the same gate;
+- each result for the machine's panel (:meth:`PolishingLink.show_result`, the display block of
+  :mod:`.display`), written by the owning link only;
 - a start-up self-check of the float32 byte order that fails closed, and a write allow-list
   (:meth:`RegisterMap.check_write`) enforced before anything reaches the wire;
 - typed errors (:mod:`wavestack.drivers.errors`) naming unit, register and function code:
@@ -43,6 +45,7 @@ from numpy.typing import ArrayLike
 
 from wavestack.drivers.errors import DeviceTimeout, ProtocolError
 from wavestack.drivers.plc.commands import CommandLedger, CommandLimits, CommandRefused
+from wavestack.drivers.plc.display import ResultDisplay, decode_display
 from wavestack.drivers.plc.gate import (HeartbeatEchoStale, PlcNotReady, command_refusal, decode_self_check,
                                        no_scan_since, not_ready)
 from wavestack.drivers.plc.heartbeat import HostHeartbeat, new_token
@@ -265,6 +268,54 @@ class PolishingLink(HostHeartbeat, JobControl, RawAccess):
                                     f"accepted id {status.last_accepted_id} (register {self._map.status.start + 1})")
             self._ledger.accepted()
             return CommandAck(command_id=command_id, attempts=attempts, status=status)
+
+    def show_result(self, display: ResultDisplay, timeout_s: float) -> None:
+        """Write one result into the display block, whole, in one FC16 request, for the machine's panel.
+
+        The block is the owner's, as the heartbeat is: a monitor link never writes it. It is no
+        command (nothing moves on it), so there is no gate and no handshake; any client reads it.
+
+        Raises
+        ------
+        ValueError
+            The map has no display block, or a figure beyond float32 (nothing sent).
+        ProtocolError
+            On a monitor link (nothing sent).
+        PlcRefused
+            1: another connection owns the PLC; 4: the watchdog has tripped.
+        DeviceTimeout, DeviceDisconnected
+            The write got no reply in time, or the connection was lost.
+        """
+        registers = self._map.encode_display(display)
+        block = self._map.display
+        assert block is not None  # encode_display refuses a map without one
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            if self._monitor:
+                raise ProtocolError(self._device, "a monitor link writes no display block (the station owns it)")
+            self._transport.ensure_connected(deadline)
+            self._write(block.start, registers, block.write_function or 16, deadline)
+
+    def read_display(self, timeout_s: float) -> ResultDisplay | None:
+        """The result the machine's panel shows (any link may read it); None when the map has no display block.
+
+        Raises
+        ------
+        PlcRefused
+            4 while the watchdog is tripped (the PLC answers nothing else).
+        ProtocolError
+            The block holds a code outside the code tables.
+        """
+        block = self._map.display
+        if block is None or block.word_order is None:
+            return None
+        deadline = deadline_after(timeout_s)
+        with self._lock:
+            registers = self._read_block(block, deadline)
+        try:
+            return decode_display(registers, block.word_order)
+        except ValueError as error:
+            raise ProtocolError(self._device, f"{error} (registers {block.start}-{block.stop - 1})") from None
 
     def read_status(self, timeout_s: float) -> PlcStatus:
         """The status block; a tripped watchdog (exception 4) is reported as ``watchdog_tripped``."""

@@ -3,8 +3,8 @@
 Every address the driver touches is named here, as frozen values built from the configuration, so
 a register map is checked once (no overlaps, counts that fit one Modbus request, function codes that
 make sense) and the driver never writes a literal address. The host may write only these places:
-the heartbeat register, the re-arm register, the command block, the job block and the owner block
-(each block whole, in one request), each with its configured function code;
+the heartbeat register, the re-arm register, the command block, the job block, the owner block
+and the display block (each block whole, in one request), each with its configured function code;
 :meth:`RegisterMap.check_write` refuses anything else before a byte goes on the wire.
 
 Layout of the blocks (``n`` = number of removal terms, ``(count - 2) / 2``):
@@ -27,6 +27,9 @@ Layout of the blocks (``n`` = number of removal terms, ``(count - 2) / 2``):
   token, until the watchdog trips; the same host reclaims it after a reconnect with the same
   token; the re-arm register takes anyone's write (the operator's). Without this block the PLC
   gives ownership to the first connection that beats.
+- display (8, optional, FC16 whole, the owner's; anyone reads it): the last result for the
+  machine's panel: counter, flags (valid, figures), residual RMS and PVr (float32 nm of surface),
+  spec verdict and limiting quantity codes (:mod:`.display`).
 
 The command block keeps publishing the measured terms for the machine's display; removal happens
 only through jobs (job file + job block).
@@ -42,10 +45,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from wavestack.drivers._checks import is_integral_in
-from wavestack.drivers.errors import LimitError
 from wavestack.drivers.plc.codec import (WORD_ORDERS, WordOrder, encode_float32, encode_float32_array, encode_uint32,
                                          round_to_float32)
+from wavestack.drivers.plc.display import DISPLAY_BLOCK_COUNT, ResultDisplay, encode_display
 from wavestack.drivers.plc.jobs import JOB_BLOCK_COUNT, MACHINE_BLOCK_COUNT, MAX_JOB_ID, JobAction
+from wavestack.drivers.plc.register_block import RegisterBlock, WriteRefused
 
 #: Registers of the owner block: a 64-bit token, four uint16.
 OWNER_COUNT = 4
@@ -78,66 +82,6 @@ _SINGLE_WRITE_FUNCTIONS = (6, 16)
 _BLOCK_WRITE_FUNCTIONS = (16,)
 
 
-class WriteRefused(LimitError):
-    """A write outside the allow-list (heartbeat, re-arm, command block) or with the wrong function
-    code; refused before anything was sent."""
-
-
-@dataclass(frozen=True)
-class RegisterBlock:
-    """A contiguous run of holding registers with one meaning.
-
-    Attributes
-    ----------
-    name
-        ``"self_check"``, ``"heartbeat"``, ``"rearm"``, ``"status"``, ``"command"``, ``"output"``,
-        ``"job"`` or ``"machine"``.
-    start
-        Address of the first register (0-based protocol address, as on the wire).
-    count
-        Number of 16-bit registers.
-    layout
-        The types inside, e.g. ``"float32"`` or ``"uint16 id, uint16 passes, float32[15]"``.
-    read_function
-        Function code used to read it: 3 (holding registers) or 4 (input registers).
-    write_function
-        Function code used to write it (6 or 16), or None for a block the host must not write.
-    word_order
-        Byte order of the float32 values inside (None for a block without float32).
-    meaning
-        One line for the README table.
-    """
-
-    name: str
-    start: int
-    count: int
-    layout: str
-    read_function: int
-    write_function: int | None
-    word_order: WordOrder | None = None
-    meaning: str = ""
-
-    @property
-    def stop(self) -> int:
-        """One past the last address."""
-        return self.start + self.count
-
-    @property
-    def writable(self) -> bool:
-        """Whether the host may write this block."""
-        return self.write_function is not None
-
-    def contains(self, address: int, count: int = 1) -> bool:
-        """Whether registers ``address .. address + count - 1`` all lie in this block."""
-        return self.start <= address and address + count <= self.stop and count >= 1
-
-    def describe(self) -> str:
-        """``"heartbeat (register 10, FC6)"`` or ``"command (registers 100-131, FC16)"``."""
-        where = f"register {self.start}" if self.count == 1 else f"registers {self.start}-{self.stop - 1}"
-        code = f"FC{self.write_function}" if self.writable else f"read-only, FC{self.read_function}"
-        return f"{self.name} ({where}, {code})"
-
-
 @dataclass(frozen=True)
 class RegisterMap:
     """Where everything lives in the PLC, checked for consistency when built.
@@ -156,6 +100,8 @@ class RegisterMap:
         The job block and the machine-state block, both or neither (None: a PLC without jobs).
     owner
         The owner block (None: the PLC gives ownership to the first connection that beats).
+    display
+        The result display block (None: the PLC shows no results).
     """
 
     unit_id: int
@@ -169,6 +115,7 @@ class RegisterMap:
     job: RegisterBlock | None = None
     machine: RegisterBlock | None = None
     owner: RegisterBlock | None = None
+    display: RegisterBlock | None = None
 
     def __post_init__(self) -> None:
         if not 0 <= self.unit_id <= 255:
@@ -181,7 +128,7 @@ class RegisterMap:
             raise ValueError(f"self_check_value must lie within the float32 range (|x| <= 3.4e38) that the "
                              f"self-check block holds, got {self.self_check_value!r}") from None
         expected = {"self_check": 2, "heartbeat": 1, "rearm": 1, "status": STATUS_COUNT, "job": JOB_BLOCK_COUNT,
-                    "machine": MACHINE_BLOCK_COUNT, "owner": OWNER_COUNT}
+                    "machine": MACHINE_BLOCK_COUNT, "owner": OWNER_COUNT, "display": DISPLAY_BLOCK_COUNT}
         if (self.job is None) != (self.machine is None):
             raise ValueError("the job block and the machine block come together: configure both or neither")
         for block in self.blocks():
@@ -203,7 +150,8 @@ class RegisterMap:
             raise ValueError(f"command block: {self.command.count} registers exceed one FC16 write ({MAX_WRITE_COUNT})")
         for block, codes in ((self.heartbeat, _SINGLE_WRITE_FUNCTIONS), (self.rearm, _SINGLE_WRITE_FUNCTIONS),
                              (self.command, _BLOCK_WRITE_FUNCTIONS),
-                             *((block, _BLOCK_WRITE_FUNCTIONS) for block in (self.job, self.owner) if block is not None)):
+                             *((block, _BLOCK_WRITE_FUNCTIONS) for block in (self.job, self.owner, self.display)
+                               if block is not None)):
             if block.write_function not in codes:
                 raise ValueError(f"{block.name} block: write function code must be one of {codes}, "
                                  f"got {block.write_function}")
@@ -238,6 +186,7 @@ class RegisterMap:
         job_register: int | None = None,
         machine_register: int | None = None,
         owner_register: int | None = None,
+        display_register: int | None = None,
     ) -> RegisterMap:
         """A register map from configuration values.
 
@@ -263,6 +212,9 @@ class RegisterMap:
             float32 values use ``word_order``.
         owner_register
             Start of the 4-register owner block (written with ``block_write_function``), or None.
+        display_register
+            Start of the 8-register display block (written with ``block_write_function``, float32
+            in ``word_order``), or None.
 
         Raises
         ------
@@ -309,6 +261,11 @@ class RegisterMap:
             owner=None if owner_register is None else RegisterBlock(
                 "owner", owner_register, OWNER_COUNT, "uint16[4] token", read_function, block_write_function, None,
                 "the host's ownership token; written whole; reads as zeros"),
+            display=None if display_register is None else RegisterBlock(
+                "display", display_register, DISPLAY_BLOCK_COUNT,
+                "uint16 result counter, uint16 flags, float32 residual RMS nm, float32 PVr nm, uint16 spec, "
+                "uint16 limiting", read_function, block_write_function, word_order,
+                "the last result for the machine's panel (owner writes, anyone reads); codes: docs/instruments.md"),
         )
 
     @property
@@ -324,8 +281,8 @@ class RegisterMap:
     def blocks(self) -> tuple[RegisterBlock, ...]:
         """Every block, in address-independent fixed order."""
         jobs = (self.job, self.machine) if self.job is not None and self.machine is not None else ()
-        owner = (self.owner,) if self.owner is not None else ()
-        return (self.self_check, self.heartbeat, self.rearm, self.status, self.command, self.output, *jobs, *owner)
+        optional = tuple(block for block in (self.owner, self.display) if block is not None)
+        return (self.self_check, self.heartbeat, self.rearm, self.status, self.command, self.output, *jobs, *optional)
 
     def check_write(self, address: int, count: int, function_code: int) -> RegisterBlock:
         """The writable block a write falls in, or refuse it.
@@ -340,7 +297,7 @@ class RegisterMap:
         Returns
         -------
         RegisterBlock
-            The heartbeat, re-arm, command, job or owner block holding the whole write.
+            The heartbeat, re-arm, command, job, owner or display block holding the whole write.
 
         Raises
         ------
@@ -428,6 +385,18 @@ class RegisterMap:
         assert order is not None
         return [int(JobAction(action)), int(job_id), *encode_uint32(crc32, order), *encode_uint32(point_count, order),
                 *encode_float32(total_dwell_s, order)]
+
+    def encode_display(self, display: ResultDisplay) -> list[int]:
+        """The display block's registers for one result (:func:`~.display.encode_display`).
+
+        Raises
+        ------
+        ValueError
+            No display block in this map, or a figure beyond the float32 range.
+        """
+        if self.display is None or self.display.word_order is None:
+            raise ValueError(f"{self.device}: the register map has no display block (configure display_register)")
+        return encode_display(display, self.display.word_order)
 
     def markdown_table(self) -> str:
         """The map as a Markdown table (address, count, type, access, function codes, meaning)."""

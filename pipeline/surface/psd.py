@@ -3,20 +3,37 @@
 Filling unmeasured pixels with a constant puts a step at every edge and drop-out, whose spectrum
 falls as ``f^-2`` and hides the surface's own above a few cycles per aperture (prysm issue 45).
 Here the map is multiplied by a window that is zero outside the aperture and rises smoothly
-inside it (:func:`aperture_window`: the aperture's own Hann-like bell). The aperture is the
+inside it (:func:`aperture_window`: a sine-squared taper over the outer tenth of the aperture's
+depth, flat inside, so that most measured pixels count in full). The aperture is the
 outline of the measured pixels with their drop-outs closed (:func:`aperture_outline`); a hole
 larger than a drop-out, such as a central obscuration, is outside it and windowed like the outer
 edge. A drop-out is neither windowed (a dip in the window at each would leak the long periods'
 power into the short ones) nor filled with a constant: it takes the Gaussian-weighted mean of
 the measured pixels around it (the normalised low-pass of :mod:`.areal_filter`, about 2 px wide),
-and :attr:`SurfacePsd.interpolated_pixels` counts them. The window-weighted least-squares plane is
-removed first. With the discrete Fourier transform ``F`` of
-``w (z - plane)`` on a grid of spacing ``dx``,
+and :attr:`SurfacePsd.interpolated_pixels` counts them.
 
-    PSD2(fx, fy) = |F|^2 dx^2 / sum(w^2)            (nm^2 mm^2, frequencies in cycles/mm)
+The map is *prewhitened* before the window: a surface's spectrum falls steeply (``f^-2`` to
+``f^-4`` in 2-D), and whatever window is used, its sidelobes carry the long periods' power into
+the short ones and bias a fitted slope; the first differences of the map along x and along y
+have a spectrum flatter by ``f^2``, which the window leaks far less, and the difference filter's
+response is divided out afterwards (prewhitening and recolouring: Percival and Walden [3]_,
+section 6.5; Blackman and Tukey). A lighter taper then suffices, which uses more of the measured
+pixels and lowers the estimate's scatter. On a grid of spacing ``dx``, with ``d_x`` and ``d_y``
+the differences of neighbouring pixels that both lie in the outline, ``w_x`` and ``w_y`` the
+geometric mean of the two pixels' window values, each difference field's window-weighted
+least-squares plane removed (the map's tilt, power and astigmatism: its quadric, form rather than
+texture, whose steep edges the light taper would otherwise leak into every band; a difference has
+no piston), and ``F_x``, ``F_y`` the discrete Fourier transforms of ``w_x d_x`` and ``w_y d_y``,
 
-whose integral over the whole frequency plane is the window-weighted mean square of the map;
-the band-limited RMS is the square root of its integral over ``f_low <= |f| <= f_high``.
+    PSD2(fx, fy) = [|F_x|^2 / sum(w_x^2) + |F_y|^2 / sum(w_y^2)] dx^2 / D(fx, fy)
+    D(fx, fy) = 4 sin^2(pi fx dx) + 4 sin^2(pi fy dx)         (nm^2 mm^2, cycles/mm)
+
+(zero at the origin). ``D`` is the power response of a first difference, so ``PSD2 D``
+integrates over the frequency plane to the window-weighted mean square of the differences (less
+the origin's share). The band-limited RMS is the square root of the integral of ``PSD2`` over
+``f_low <= |f| <= f_high``. Below the resolvable band (periods longer than the area, where ``D``
+is smallest) the recolouring magnifies what the window spreads there, so ``PSD2`` means nothing
+there, and bands reaching into it are refused (:func:`check_band`).
 The azimuthally averaged spectrum is the mean of PSD2 over rings of ``|f|`` one frequency step
 wide; its 1-D form ``2 pi f <PSD2>`` (nm^2 mm) integrates over ``f`` to the same mean square.
 
@@ -28,6 +45,8 @@ References
 .. [1] E. L. Church and P. Z. Takacs, "Surface scattering", in Handbook of Optics (McGraw-Hill,
    1995), vol. I, ch. 7 (PSD conventions, finite-aperture estimates).
 .. [2] prysm issue 45, "PSD of data with missing values" (filling corrupts the spectrum).
+.. [3] D. B. Percival and A. T. Walden, *Spectral Analysis for Physical Applications*
+   (Cambridge University Press, 1993), section 6.5 (prewhitening).
 """
 
 from __future__ import annotations
@@ -53,6 +72,8 @@ DROPOUT_CLOSING_PX = 3
 # Drop-outs take the normalised Gaussian low-pass of their neighbours at this cut-off, in units
 # of the closing radius (12 px: a weighting function of about 2 px standard deviation).
 _DROPOUT_CUTOFF = 4.0
+#: The window's taper, as a fraction of the aperture's depth (the largest distance of a pixel to its edge).
+TAPER_FRACTION = 0.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,8 +188,9 @@ def aperture_window(outline: NDArray[np.bool_], taper_px: float | None = None) -
     outline : ndarray of bool, shape (rows, cols)
         The aperture (:func:`aperture_outline` of the measured pixels).
     taper_px : float, optional
-        Taper width ``T``, pixels; default the largest distance ``d`` of a pixel centre to the
-        outline's edge, which makes the window the aperture's own Hann-like bell.
+        Taper width ``T``, pixels (at least 0.5); default :data:`TAPER_FRACTION` of the largest
+        distance ``d`` of a pixel centre to the outline's edge, and at least 2 pixels. (``T`` equal
+        to that largest distance makes the window the aperture's own Hann-like bell.)
 
     Returns
     -------
@@ -176,7 +198,10 @@ def aperture_window(outline: NDArray[np.bool_], taper_px: float | None = None) -
     """
     distance = cv2.distanceTransform(np.pad(outline, 1).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     distance = np.maximum(distance[1:-1, 1:-1].astype(np.float64) - 0.5, 0.0)  # to the unmeasured pixel's edge
-    taper = float(distance.max()) if taper_px is None else real_at_least(taper_px, "taper_px", 0.5)
+    if taper_px is None:
+        taper = max(TAPER_FRACTION * float(distance.max()), 2.0)
+    else:
+        taper = real_at_least(taper_px, "taper_px", 0.5)
     return np.where(outline, np.sin(0.5 * math.pi * np.minimum(distance / max(taper, 0.5), 1.0)) ** 2, 0.0)
 
 
@@ -226,7 +251,8 @@ def surface_psd(area: MeasuredArea, surface_nm: ArrayLike, pixel_mm: float, *,
     Raises
     ------
     ValueError
-        For a non-positive pixel, a map of another shape, or a non-finite measured pixel.
+        For a non-positive pixel, a map of another shape, a non-finite measured pixel, or an area
+        without two neighbouring pixels.
 
     Examples
     --------
@@ -250,28 +276,68 @@ def surface_psd(area: MeasuredArea, surface_nm: ArrayLike, pixel_mm: float, *,
         filled = gaussian_low_pass_at(rows, cols, values, _DROPOUT_CUTOFF * DROPOUT_CLOSING_PX, at=window.dropouts)
         rows, cols = np.concatenate([rows, gap_rows]), np.concatenate([cols, gap_cols])
         values = np.concatenate([values, filled])
-    weights = window.window[rows, cols]
-    detrended = values - _weighted_plane(rows, cols, values, weights * weights)
     top, left = rows.min(), cols.min()
-    shape = (fft.next_fast_len(int(rows.max() - top + 1)), fft.next_fast_len(int(cols.max() - left + 1)))
-    windowed = np.zeros(shape)
-    windowed[rows - top, cols - left] = weights * detrended
-    spectrum = fft.fftshift(np.abs(fft.fft2(windowed)) ** 2) * pixel_mm**2 / float(np.sum(weights * weights))
-    fy = fft.fftshift(fft.fftfreq(shape[0], pixel_mm))
-    fx = fft.fftshift(fft.fftfreq(shape[1], pixel_mm))
+    box = (int(rows.max() - top + 1), int(cols.max() - left + 1))
+    heights, weights, inside = np.zeros(box), np.zeros(box), np.zeros(box, bool)
+    heights[rows - top, cols - left] = values
+    weights[rows - top, cols - left] = window.window[rows, cols]
+    inside[rows - top, cols - left] = True
+    shape = (fft.next_fast_len(box[0]), fft.next_fast_len(box[1]))
+    fy = fft.fftfreq(shape[0], pixel_mm)
+    fx = fft.fftfreq(shape[1], pixel_mm)
+    spectrum, response = _prewhitened_spectrum(heights, weights, inside, shape, fx * pixel_mm, fy * pixel_mm)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        recoloured = np.where(response > 1e-12, spectrum / response, 0.0) * pixel_mm**2
+    spectrum = fft.fftshift(recoloured)
+    fy, fx = fft.fftshift(fy), fft.fftshift(fx)
     centres, means = _azimuthal_mean(fx, fy, spectrum)
     return SurfacePsd(pixel_mm=pixel_mm, fx_per_mm=fx, fy_per_mm=fy, psd2_nm2_mm2=spectrum,
                       frequency_per_mm=centres, azimuthal_nm2_mm2=means,
                       resolvable_per_mm=resolvable_band(area, pixel_mm), interpolated_pixels=int(gap_rows.size))
 
 
-def _weighted_plane(rows: NDArray[np.int64], cols: NDArray[np.int64], values: NDArray[np.float64],
-                    weights: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The weighted least-squares plane through the values, at their pixels."""
+def _prewhitened_spectrum(heights: NDArray[np.float64], weights: NDArray[np.float64], inside: NDArray[np.bool_],
+                          shape: tuple[int, int], fx_per_px: NDArray[np.float64],
+                          fy_per_px: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The summed, normalised periodograms of the windowed first differences along x and y, and the
+    differences' power response ``D`` on the same (unshifted) grid (module notes).
+
+    Raises
+    ------
+    ValueError
+        If no two neighbouring pixels lie in the outline along either axis.
+    """
+    spectrum, response = np.zeros(shape), np.zeros(shape)
+    for axis, frequency in ((0, fy_per_px[:, None]), (1, fx_per_px[None, :])):
+        ahead = [slice(None), slice(None)]
+        behind = [slice(None), slice(None)]
+        ahead[axis], behind[axis] = slice(1, None), slice(None, -1)
+        pairs = inside[tuple(ahead)] & inside[tuple(behind)]
+        pair_weights = np.where(pairs, np.sqrt(weights[tuple(ahead)] * weights[tuple(behind)]), 0.0)
+        total = float(np.sum(pair_weights**2))
+        if total <= 0:
+            continue
+        differences = heights[tuple(ahead)] - heights[tuple(behind)]
+        differences = differences - _weighted_plane_on(differences, pair_weights**2, pairs)  # the map's quadric
+        field = np.zeros(shape)
+        field[: differences.shape[0], : differences.shape[1]] = pair_weights * differences
+        spectrum += np.abs(fft.fft2(field)) ** 2 / total
+        response = response + 4.0 * np.sin(np.pi * frequency) ** 2
+    if not np.any(response):
+        raise ValueError("PSD: the measured area holds no two neighbouring pixels; expected an area at least "
+                         "two pixels wide")
+    return spectrum, response
+
+
+def _weighted_plane_on(values: NDArray[np.float64], weights: NDArray[np.float64],
+                       where: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """The weighted least-squares plane through ``values`` at the pixels ``where``, over the whole grid."""
+    rows, cols = np.nonzero(where)
     design = np.column_stack([np.ones(rows.size), cols - cols.mean(), rows - rows.mean()])
-    root = np.sqrt(weights)
-    solution, *_ = np.linalg.lstsq(design * root[:, None], values * root, rcond=None)
-    return design @ solution
+    root = np.sqrt(weights[rows, cols])
+    solution, *_ = np.linalg.lstsq(design * root[:, None], values[rows, cols] * root, rcond=None)
+    grid_rows, grid_cols = np.indices(values.shape)
+    return solution[0] + solution[1] * (grid_cols - cols.mean()) + solution[2] * (grid_rows - rows.mean())
 
 
 def _azimuthal_mean(fx: NDArray[np.float64], fy: NDArray[np.float64],

@@ -3,8 +3,8 @@
 Re-implemented from the register map in the README and ``config/plc-*.toml`` (not from the driver's
 map): every block is read with one function code (``read_function``, 3 or 4); the heartbeat and the
 re-arm register are written alone with ``single_write_function`` (6, or 16 with one register); the
-command block, the job block and the owner block only whole, each in one FC16 request; nothing else
-is written. Which *connection* may write is :mod:`.ownership`'s rule.
+command block, the job block, the owner block and the display block only whole, each in one FC16
+request; nothing else is written. Which *connection* may write is :mod:`.ownership`'s rule.
 
 Which exception (Modbus Application Protocol Specification v1.1b3, section 7, and the transaction
 state diagram of section 4.4, where the function code is checked before the address):
@@ -27,7 +27,7 @@ from __future__ import annotations
 from pymodbus.constants import ExcCodes
 from pymodbus.pdu import DecodePDU, ExceptionResponse, ModbusPDU
 
-from wavestack.simulators.plc.layout import JOB_COUNT, OWNER_COUNT, PlcSimLayout
+from wavestack.simulators.plc.layout import DISPLAY_COUNT, JOB_COUNT, OWNER_COUNT, PlcSimLayout
 
 __all__ = ["COMMAND_WRITE_FUNCTION", "DATA_FUNCTIONS", "check_request", "refusing_request_classes",
            "served_functions"]
@@ -65,7 +65,8 @@ def check_request(layout: PlcSimLayout, function_code: int, address: int, count:
     allowed = ((layout.heartbeat_register, 1, layout.single_write_function),
                (layout.rearm_register, 1, layout.single_write_function),
                (start, size, COMMAND_WRITE_FUNCTION), (layout.job_register, JOB_COUNT, COMMAND_WRITE_FUNCTION),
-               (layout.owner_register, OWNER_COUNT, COMMAND_WRITE_FUNCTION))
+               (layout.owner_register, OWNER_COUNT, COMMAND_WRITE_FUNCTION),
+               (layout.display_register, DISPLAY_COUNT, COMMAND_WRITE_FUNCTION))
     if (address, count, function_code) in allowed:
         return None
     return ExcCodes.ILLEGAL_ADDRESS

@@ -12,10 +12,10 @@ from pymodbus.simulator import DataType, SimData
 
 from wavestack.simulators.plc.words import float_to_words
 
-__all__ = ["JOB_COUNT", "MACHINE_COUNT", "OWNER_COUNT", "PlcSimLayout"]
+__all__ = ["DISPLAY_COUNT", "JOB_COUNT", "MACHINE_COUNT", "OWNER_COUNT", "PlcSimLayout"]
 
-#: Registers of the job block, of the machine block and of the owner block.
-JOB_COUNT, MACHINE_COUNT, OWNER_COUNT = 8, 7, 4
+#: Registers of the job block, of the machine block, of the owner block and of the display block.
+JOB_COUNT, MACHINE_COUNT, OWNER_COUNT, DISPLAY_COUNT = 8, 7, 4, 8
 _ORDERS = ("ABCD", "CDAB", "BADC", "DCBA")
 
 
@@ -56,6 +56,9 @@ class PlcSimLayout:
     owner_register
         Start of the 4-register owner block (a connection claims ownership with a token written
         there, FC16, whole; it reads as zeros), or None: the first connection that beats owns.
+    display_register
+        Start of the 8-register result display block (the owner writes it whole with FC16; every
+        connection reads it: the panel's HMI), or None.
     """
 
     unit_id: int
@@ -77,6 +80,7 @@ class PlcSimLayout:
     machine_register: int | None = None
     job_word_order: str | None = None
     owner_register: int | None = None
+    display_register: int | None = None
 
     def __post_init__(self) -> None:
         if (self.job_register is None) != (self.machine_register is None):
@@ -98,7 +102,8 @@ class PlcSimLayout:
                         (self.status_register, 3), self.command_block, self.output_block,
                         *([(self.job_register, JOB_COUNT), (self.machine_register, MACHINE_COUNT)]
                           if self.job_register is not None and self.machine_register is not None else []),
-                        *([(self.owner_register, OWNER_COUNT)] if self.owner_register is not None else [])])
+                        *([(self.owner_register, OWNER_COUNT)] if self.owner_register is not None else []),
+                        *([(self.display_register, DISPLAY_COUNT)] if self.display_register is not None else [])])
         for (first, count), (second, _) in zip(spans, spans[1:]):
             if second < first + count:
                 raise ValueError(f"register blocks starting at {first} and {second} overlap")
@@ -109,7 +114,7 @@ class PlcSimLayout:
         return (self.command_block[1] - 2) // 2
 
     def simdata(self) -> list[SimData]:
-        """pymodbus register blocks: writable heartbeat, re-arm and command; the rest read-only."""
+        """pymodbus register blocks: writable heartbeat, re-arm, command, job, owner and display; the rest read-only."""
         constant = float_to_words(self.self_check_value, self.self_check_word_order)
         return [
             SimData(self.self_check_register, values=constant, datatype=DataType.REGISTERS, readonly=True),
@@ -124,6 +129,8 @@ class PlcSimLayout:
                        readonly=True)] if self.job_register is not None and self.machine_register is not None else []),
             *([SimData(self.owner_register, count=OWNER_COUNT, values=0, datatype=DataType.REGISTERS)]
               if self.owner_register is not None else []),
+            *([SimData(self.display_register, count=DISPLAY_COUNT, values=0, datatype=DataType.REGISTERS)]
+              if self.display_register is not None else []),
         ]
 
     @property

@@ -2,9 +2,9 @@
 
 Re-implemented from the register map's access model (docs/instruments.md, "Who may write"), not
 from the driver. The PLC serves any number of Modbus/TCP connections; all may read, but the
-heartbeat, the command block and the job block take writes from one connection only, the
-*owner*, and the re-arm register from anyone (the operator's monitor link re-arms a tripped
-watchdog). Ownership goes to the first connection that claims it and lasts until the watchdog
+heartbeat, the command block, the job block and the display block take writes from one connection
+only, the *owner*, and the re-arm register from anyone (the operator's monitor link re-arms a
+tripped watchdog). Ownership goes to the first connection that claims it and lasts until the watchdog
 trips (or the PLC is power-cycled): a second connection can neither feed the watchdog of a host
 that died nor command the machine.
 
@@ -70,7 +70,7 @@ def first_heartbeat(ownership: Ownership, connection: int) -> Ownership:
 
 
 def owns(ownership: Ownership, connection: int) -> bool:
-    """Whether ``connection`` may write the heartbeat, command and job blocks."""
+    """Whether ``connection`` may write the heartbeat, command, job and display blocks."""
     return ownership.connection is not None and ownership.connection == connection
 
 

@@ -8,7 +8,7 @@ each request's address and written values and lets it mirror its state into pymo
 
 Rules:
 
-- writes: one connection owns the heartbeat, command and job blocks (:mod:`.ownership`): the first
+- writes: one connection owns the heartbeat, command, job and display blocks (:mod:`.ownership`): the first
   that claims it (with the owner block's token, or by the first heartbeat on a map without one),
   until the watchdog trips; another connection's write there answers exception 1 (illegal
   function: not for this connection); the re-arm register takes anyone's write (the operator's);
@@ -24,6 +24,9 @@ Rules:
   busy (a pass, or LOAD while a job runs), 3 for a START or ABORT of a job not loaded; ABORT is
   always taken. The watchdog tripping, the e-stop and a restart stop a running job (ABORTED);
 - the machine block mirrors the machine's state, reason, job id, points done and point count;
+- the display block (if configured) keeps what the owner last wrote there, whole, for any client to
+  read (the panel's HMI); the watchdog tripping zeroes it (result invalid, no verdict), as it
+  zeroes the outputs: a host that stopped must not leave its last verdict on the panel;
 - the status block holds the status word (bit 0 ready, 1 busy, 2 fault, 3 e-stop, 4 heartbeat
   seen), the last accepted id and the heartbeat echo (frozen by the ``freeze_heartbeat_echo`` fault).
 """
@@ -40,7 +43,7 @@ from numpy.typing import NDArray
 from pymodbus.constants import ExcCodes
 
 from wavestack.simulators.plc.faults import SimFaults
-from wavestack.simulators.plc.layout import JOB_COUNT, MACHINE_COUNT, OWNER_COUNT, PlcSimLayout
+from wavestack.simulators.plc.layout import DISPLAY_COUNT, JOB_COUNT, MACHINE_COUNT, OWNER_COUNT, PlcSimLayout
 from wavestack.simulators.plc.job_state import StopReason
 from wavestack.simulators.plc.machine import PolishingMachine
 from wavestack.simulators.plc.ownership import NOBODY, Ownership, claim, closed, first_heartbeat, owns
@@ -99,6 +102,7 @@ class PolishingPlcProgram:
         self.machine = machine
         self._lock = threading.Lock()
         self._job_regs = [0] * JOB_COUNT
+        self._display_regs = [0] * DISPLAY_COUNT
         self._watchdog = HeartbeatWatchdog(layout.watchdog_timeout_s)
         self._echo = 0
         self._rearm_value = 0
@@ -221,6 +225,7 @@ class PolishingPlcProgram:
             self._watchdog = HeartbeatWatchdog(self.layout.watchdog_timeout_s, self._watchdog.value)
             self._owner = NOBODY
             self._outputs = self._zero_outputs()
+            self._display_regs = [0] * DISPLAY_COUNT
             self._busy_until = now
 
     def _scan(self, now: float) -> None:
@@ -228,6 +233,7 @@ class PolishingPlcProgram:
             if self.machine is not None:
                 self.machine.stop(StopReason.WATCHDOG)
             self._outputs = self._zero_outputs()
+            self._display_regs = [0] * DISPLAY_COUNT
             self._owner = NOBODY
             _log.warning("PLC simulator: watchdog tripped (no heartbeat change for %.3f s); outputs zeroed",
                          self.layout.watchdog_timeout_s)
@@ -269,6 +275,8 @@ class PolishingPlcProgram:
             if refusal is not None:
                 return refusal
             self._job_regs = regs
+        if layout.display_register is not None and layout.display_register in written:
+            self._display_regs = [written.get(layout.display_register + i, 0) for i in range(DISPLAY_COUNT)]
         return None
 
     def _check_owner(self, written: dict[int, int], connection: int) -> ExcCodes | None:
@@ -283,7 +291,7 @@ class PolishingPlcProgram:
                 return ExcCodes.ILLEGAL_FUNCTION
         start, count = layout.command_block
         owner_only = [a for a in written if a == layout.heartbeat_register or start <= a < start + count
-                      or (layout.job_register is not None and layout.job_register <= a < layout.job_register + JOB_COUNT)]
+                      or _within(a, layout.job_register, JOB_COUNT) or _within(a, layout.display_register, DISPLAY_COUNT)]
         if not owner_only:
             return None
         if layout.owner_register is None and layout.heartbeat_register in written:
@@ -367,6 +375,8 @@ class PolishingPlcProgram:
             put(layout.machine_register, self._machine_words())
         if layout.owner_register is not None:
             put(layout.owner_register, [0] * OWNER_COUNT)  # write-only: a token is never read back
+        if layout.display_register is not None:
+            put(layout.display_register, self._display_regs)
 
     def _machine_words(self) -> list[int]:
         if self.machine is None:
@@ -376,3 +386,7 @@ class PolishingPlcProgram:
         return [int(snap.state), int(snap.reason), snap.job_id, *uint32_to_words(snap.points_done, order),
                 *uint32_to_words(snap.point_count, order)]
 
+
+def _within(address: int, start: int | None, count: int) -> bool:
+    """Whether ``address`` lies in the optional block ``[start, start + count)``."""
+    return start is not None and start <= address < start + count

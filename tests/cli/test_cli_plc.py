@@ -11,7 +11,7 @@ import pytest
 
 from wavestack.cli import EXIT_BAD_INPUT, EXIT_DEVICE_ERROR, main
 from wavestack.config import load_plc_config
-from wavestack.drivers.plc import PolishingLink
+from wavestack.drivers.plc import PolishingLink, ResultDisplay, SpecCode
 from wavestack.simulated import plc_layout, polishing_station
 from wavestack.simulators.plc import PlcSimulator, WatchdogState
 
@@ -38,9 +38,11 @@ def test_status_and_rearm_from_a_second_client_while_the_station_link_is_connect
         url = f"tcp://127.0.0.1:{sim.port}"
         station.connect(timeout_s=2.0)
         station.heartbeat(timeout_s=1.0)
+        station.show_result(ResultDisplay(12, True, 3.21, 45.6, SpecCode.FAIL, "IRR"), timeout_s=1.0)
         assert main(["plc", "status", "--url", url]) == 0
         line = capsys.readouterr().out
         assert line.count("\n") == 1 and "READY" in line and f"127.0.0.1:{sim.port}" in line
+        assert "; panel: result 12 valid, residual RMS 3.21 nm, PVr 45.6 nm, FAIL (limiting IRR)" in line
         assert _wait_for(lambda: sim.watchdog_state is WatchdogState.TRIPPED)  # the station's host stalls
         assert main(["plc", "status", "--url", url]) == 0
         assert "TRIPPED" in capsys.readouterr().out
@@ -74,3 +76,12 @@ def test_no_plc_is_a_device_error_in_one_line(action: str, capsys) -> None:
 def test_a_bad_url_names_it(capsys) -> None:
     assert main(["plc", "status", "--url", "udp://x"]) == EXIT_BAD_INPUT
     assert "udp://x" in capsys.readouterr().err
+
+
+def test_the_panel_line_names_an_invalid_result_and_a_missing_verdict() -> None:
+    from wavestack.cli.plc import describe_display
+    from wavestack.drivers.plc import invalid_display
+
+    assert describe_display(invalid_display(7, has_spec=True)) == "panel: result 7 INVALID, not judged"
+    assert describe_display(ResultDisplay(8, True, 2.5, None, SpecCode.NO_SPEC)) == (
+        "panel: result 8 valid, residual RMS 2.5 nm, no spec")

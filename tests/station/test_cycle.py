@@ -6,13 +6,14 @@ import json
 import logging
 import math
 from dataclasses import FrozenInstanceError, dataclass
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from wavestack.config import OutputSettings
 from wavestack.drivers.frames import Frame
-from wavestack.drivers.plc import MachineOutputs
+from wavestack.drivers.plc import MachineOutputs, ResultDisplay, SpecCode
 from wavestack.pipeline import InterferometerOutcome
 from wavestack.station import (
     ApertureRecord,
@@ -130,7 +131,12 @@ class _FakeLink:
 
     def __init__(self, n_terms: int = 5) -> None:
         self.sent: list[tuple[int, tuple[float, ...], int]] = []
+        self.shown: list[ResultDisplay] = []
         self.n_terms = n_terms
+        self.register_map = SimpleNamespace(display=object())  # a map with a display block
+
+    def show_result(self, display: ResultDisplay, timeout_s: float) -> None:
+        self.shown.append(display)
 
     def restrict(self, limits: object) -> object:
         return limits
@@ -170,9 +176,14 @@ def test_the_output_stage_returns_what_it_sent() -> None:
     assert record.sent and record.command.command_id == 1 and record.command.status == "OK"
     assert record.command.values_nm == pytest.approx((0.0, 0.0, 0.0, 0.01 * scale, -0.02 * scale))
     assert link.sent == [(1, record.command.values_nm, settings.passes)]
-    lost = output.device_lost("device: gone", time.time_ns())
+    # the panel: the fit's residual in nm of surface, no surface figures, no drawing on this station
+    assert record.displayed and len(link.shown) == 1
+    assert link.shown[0] == ResultDisplay(0, True, link.shown[0].residual_rms_nm, None, SpecCode.NO_SPEC)
+    assert link.shown[0].residual_rms_nm == pytest.approx(0.001 * 600.0 * settings.surface_factor)
+    lost = output.device_lost("device: gone", time.time_ns(), 1)
     assert lost.heartbeat is not None and lost.heartbeat.ok  # a device fault is not a host fault: still beating
     assert not lost.sent and "HELD" in lost.command.status
+    assert lost.displayed and link.shown[-1] == ResultDisplay(1, False, 0.0, None, SpecCode.NO_SPEC)
 
 
 def test_with_output_measures_the_latency_to_the_end_of_the_send() -> None:
@@ -231,6 +242,6 @@ def test_a_device_lost_before_the_output_is_armed_still_warns(caplog: pytest.Log
     output = PlcOutput(_FakeLink(2), OutputSettings(), 2, wavelength_nm=600.0, max_age_s=1.0,  # type: ignore[arg-type]
                        timeout_s=1.0)
     caplog.set_level(logging.INFO)
-    lost = output.device_lost("device: camera unplugged", 20_000_000_000)
+    lost = output.device_lost("device: camera unplugged", 20_000_000_000, 0)
     assert not lost.sent and "HELD" in lost.command.status and "NOT_ARMED" not in lost.command.status
     assert any("camera unplugged" in w for w in _warnings(caplog))

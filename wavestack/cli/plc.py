@@ -2,7 +2,8 @@
 
 Run while a station is running: the command opens a second Modbus/TCP connection as a *monitor*
 (it never writes the heartbeat, which the station owns, and never sends a command). ``status``
-prints one line; ``rearm`` writes 1 to the PLC's re-arm register after a watchdog trip and prints
+prints one line: the PLC's state, and what the machine's panel shows (the display block: the
+last result's validity, residual RMS, PVr and the drawing's verdict); ``rearm`` writes 1 to the PLC's re-arm register after a watchdog trip and prints
 the status after it. A running station then sees the PLC healthy at its next heartbeat, reads back
 what the machine holds (the watchdog zeroed the outputs), resets its safety stage to it and
 re-arms its output on the next valid fresh result. This is the only way a trip is recovered once
@@ -25,9 +26,9 @@ from pathlib import Path
 from wavestack.cli.arguments import positive_float
 from wavestack.cli.command import Command
 from wavestack.config import load_plc_config
-from wavestack.drivers.plc import PlcStatus, PolishingLink
+from wavestack.drivers.plc import PlcStatus, PolishingLink, ResultDisplay, SpecCode
 
-__all__ = ["COMMAND", "describe_status", "run_plc"]
+__all__ = ["COMMAND", "describe_display", "describe_status", "run_plc"]
 
 
 def add_plc_arguments(parser: argparse.ArgumentParser) -> None:
@@ -49,6 +50,16 @@ def describe_status(status: PlcStatus) -> str:
     flags = [name for name, on in (("fault", status.fault), ("heartbeat seen", status.heartbeat_seen)) if on]
     return (f"{state}; last accepted command {status.last_accepted_id}, heartbeat echo {status.heartbeat_echo}, "
             f"status word {status.raw_word}" + (f" ({', '.join(flags)})" if flags else ""))
+
+
+def describe_display(display: ResultDisplay) -> str:
+    """The panel in a few words: ``"panel: result 12 valid, residual RMS 3.21 nm, PVr 45.6 nm, FAIL (limiting IRR)"``."""
+    verdict = {SpecCode.NO_SPEC: "no spec", SpecCode.NOT_JUDGED: "not judged"}.get(
+        display.spec, f"{display.spec.name} (limiting {display.limiting})")
+    if not display.valid:
+        return f"panel: result {display.result_index} INVALID, {verdict}"
+    pvr = f", PVr {display.pvr_nm:.3g} nm" if display.pvr_nm is not None else ""
+    return f"panel: result {display.result_index} valid, residual RMS {display.residual_rms_nm:.3g} nm{pvr}, {verdict}"
 
 
 def _link(args: argparse.Namespace) -> PolishingLink:
@@ -75,7 +86,9 @@ def run_plc(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             note = "re-armed" if was_tripped else "re-arm written (the watchdog was not tripped)"
             print(f"{link.device}: {note}; now {describe_status(status)}")
         else:
-            print(f"{link.device}: {describe_status(status)}")
+            display = None if status.watchdog_tripped else link.read_display(timeout_s=args.timeout)
+            panel = "" if display is None else f"; {describe_display(display)}"
+            print(f"{link.device}: {describe_status(status)}{panel}")
     return 0
 
 

@@ -74,6 +74,8 @@ class PlcLinkSettings:
                                            doc="first of 7 read-only registers: state, reason, job id, progress")
     owner_register: int | None = setting(12, minimum=0, maximum=65532,
                                          doc="first of 4 registers: the host's ownership token (FC16, whole)")
+    display_register: int | None = setting(340, minimum=0, maximum=65528,
+                                           doc="first of 8 registers: each result for the machine's panel (FC16, whole)")
     job_folder: str | None = setting(None, doc="where the host writes job files (the machine's share)")
     job_key_file: str | None = setting(None, doc="a file holding the job key (hex): job files carry their "
                                                  "HMAC-SHA256 and the machine runs only those; relative to this file")
@@ -115,7 +117,8 @@ class PlcLinkSettings:
             block_write_function=self.command_write_function_code,
             self_check_word_order=self.self_check_word_order, command_word_order=self.command_word_order,
             output_word_order=self.output_word_order, job_register=self.job_register,
-            machine_register=self.machine_register, owner_register=self.owner_register)
+            machine_register=self.machine_register, owner_register=self.owner_register,
+            display_register=self.display_register)
 
     def job_limits(self) -> JobLimits:
         """The host's job limits (raises ValueError for an empty travel)."""

@@ -121,7 +121,7 @@ def plc_layout(plc: PlcConfig) -> PlcSimLayout:
         read_function=link.read_function_code, single_write_function=link.single_write_function_code,
         pass_duration_s=plc.simulator.polishing.pass_duration_s if plc.simulator else 0.0,
         job_register=link.job_register, machine_register=link.machine_register, job_word_order=link.word_order,
-        owner_register=link.owner_register)
+        owner_register=link.owner_register, display_register=link.display_register)
 
 
 def machine_settings(plc: PlcConfig, job_folder: str | Path | None = None) -> MachineSimSettings:

@@ -13,6 +13,11 @@ The heartbeat is sent from the result loop (each result, each lost-device cycle,
 the host itself stalls: a camera or piezo fault is not a host fault. A PLC error never stops the
 station: it is reported with the result, and the next cycle tries again.
 
+Every cycle also shows its result on the machine's panel: the PLC's display block (valid, residual
+RMS, PVr, the drawing's verdict and limiting quantity; :mod:`.plc_display`), written through the same
+owning link after the command, whatever the command's fate (a held or invalid result is shown as
+it is). A failed display write is reported with the result and never holds a command back.
+
 The output's life is the state machine of :mod:`wavestack.station.output_state`: commands go out
 only while ``ARMED``; a tripped, e-stopped, not scanning, not ready or unreachable PLC gets none;
 when it is healthy again (a trip: after an operator's ``wavestack plc rearm``) the output reads
@@ -40,9 +45,11 @@ from numpy.typing import NDArray
 
 from wavestack.config import OutputSettings
 from wavestack.drivers.errors import DeviceError
-from wavestack.drivers.plc import CommandLimits, HeartbeatEchoStale, PlcRefused, PlcStatus, PolishingLink
+from wavestack.drivers.plc import (CommandLimits, HeartbeatEchoStale, PlcRefused, PlcStatus, PolishingLink, ResultDisplay,
+                                   invalid_display)
 from wavestack.drivers.safety import SafeOutput, SafetyLimits, SafetyStage
 from wavestack.station.output_state import OutputAction, OutputMode, OutputState, PlcEvent, hold_reason, transition
+from wavestack.station.plc_display import result_display
 from wavestack.station.plc_status import Heartbeat
 from wavestack.station.results import OutputRecord, SentCommand, StationResult
 
@@ -108,6 +115,12 @@ class PlcOutput:
     heartbeat_period_s : float
         :meth:`keep_alive` beats when the last heartbeat is at least this old, s (the station passes
         a quarter of the PLC's watchdog timeout).
+    spec_configured : bool
+        The station checks a drawing tolerance (the display shows a result without a verdict as
+        "not judged"). Results go to the display block only when the link's map has one.
+    surface_factor : float or None
+        Surface per wavefront of the display's residual RMS: the surface figures' (``[surface]``),
+        so that it shares PVr's convention; None: the output's (``[outputs] surface_factor``).
 
     Notes
     -----
@@ -115,7 +128,8 @@ class PlcOutput:
     """
 
     def __init__(self, link: PolishingLink, settings: OutputSettings, n_terms: int, *, wavelength_nm: float,
-                 max_age_s: float, timeout_s: float, heartbeat_period_s: float = 0.5) -> None:
+                 max_age_s: float, timeout_s: float, heartbeat_period_s: float = 0.5,
+                 spec_configured: bool = False, surface_factor: float | None = None) -> None:
         if not heartbeat_period_s > 0:
             raise ValueError(f"heartbeat_period_s must be > 0 s, got {heartbeat_period_s!r}")
         self._link = link
@@ -124,6 +138,10 @@ class PlcOutput:
         # surface nm per wave of measured wavefront: waves x wavelength_nm is the wavefront in nm, x surface_factor
         # the surface (docs/conventions.md, "Surface")
         self._scale_nm = wavelength_nm * settings.surface_factor * settings.gain
+        self._surface_nm_per_wave = wavelength_nm * (settings.surface_factor if surface_factor is None else surface_factor)
+        self._spec_configured = spec_configured
+        self._shows_results = link.register_map.display is not None
+        self._display_failing = False
         self._timeout_s = timeout_s
         self._max_age_s = max_age_s
         self._heartbeat_period_s = float(heartbeat_period_s)
@@ -219,27 +237,49 @@ class PlcOutput:
 
     # ------------------------------------------------------------------ results
     def send(self, result: StationResult) -> OutputRecord:
-        """The cycle's heartbeat, then the result through the safety stage to the PLC.
+        """The cycle's heartbeat, the result through the safety stage to the PLC, then the result on its panel.
 
         Returns
         -------
         OutputRecord
-            The heartbeat's status and what the safety stage made of the result.
+            The heartbeat's status, what the safety stage made of the result, and whether the
+            display block took it.
         """
         with self._lock:
             heartbeat = self.heartbeat()
             coefficients = np.asarray(result.coefficients, dtype=np.float64) if result.coefficients else None
             command = self.publish(coefficients, valid=result.valid, measured_at_s=result.exposure_time_ns * 1e-9,
                                    now_s=time.time_ns() * 1e-9, reason=result.reason)
-            return OutputRecord(heartbeat, command)
+            display = result_display(result, surface_nm_per_wave=self._surface_nm_per_wave,
+                                     spec_configured=self._spec_configured)
+            return OutputRecord(heartbeat, command, self._show(display, heartbeat))
 
-    def device_lost(self, reason: str, now_ns: int) -> OutputRecord:
-        """No measurement this cycle (a lost device): a heartbeat (the host is alive), and the stage holds."""
+    def device_lost(self, reason: str, now_ns: int, index: int) -> OutputRecord:
+        """No measurement this cycle (a lost device): a heartbeat (the host is alive), the stage holds,
+        and the panel shows result ``index`` invalid."""
         now_s = now_ns * 1e-9
         with self._lock:
             heartbeat = self.heartbeat()
             safe = self.stage.propose(None, valid=False, measured_at_s=now_s, now_s=now_s, reason=reason)
-            return OutputRecord(heartbeat, self._held(safe))
+            shown = self._show(invalid_display(index, has_spec=self._spec_configured), heartbeat)
+            return OutputRecord(heartbeat, self._held(safe), shown)
+
+    def _show(self, display: ResultDisplay, heartbeat: Heartbeat) -> bool | None:
+        """Write ``display`` to the panel; None without a display block, False when not written (the
+        heartbeat failed, so the PLC takes no write from this host now, or the write failed)."""
+        if not self._shows_results:
+            return None
+        if not heartbeat.ok:
+            return False
+        try:
+            self._link.show_result(display, self._timeout_s)
+        except DeviceError as error:
+            level = logging.DEBUG if self._display_failing else logging.WARNING  # once per run of failures
+            logger.log(level, "PLC display block not written (result %d): %s", display.result_index, error)
+            self._display_failing = True
+            return False
+        self._display_failing = False
+        return True
 
     def publish(self, coefficients_waves: NDArray[np.float64] | None, *, valid: bool, measured_at_s: float,
                 now_s: float, reason: str | None) -> SentCommand:

@@ -57,17 +57,20 @@ class SentCommand:
 
 @dataclass(frozen=True)
 class OutputRecord:
-    """What the output stage did for one result: the heartbeat and the command."""
+    """What the output stage did for one result: the heartbeat, the command, and whether the PLC's
+    display block took the result (None: the PLC has no display block); JSON key ``plc_display``."""
 
     heartbeat: Heartbeat | None
     command: SentCommand
+    displayed: bool | None = None
 
     @property
     def sent(self) -> bool:
         return self.command.sent
 
     def to_json(self) -> dict[str, object]:
-        return {**(self.heartbeat.to_json() if self.heartbeat is not None else {}), **self.command.to_json()}
+        shown = {} if self.displayed is None else {"plc_display": self.displayed}
+        return {**(self.heartbeat.to_json() if self.heartbeat is not None else {}), **self.command.to_json(), **shown}
 
 
 @dataclass(frozen=True)

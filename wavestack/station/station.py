@@ -163,7 +163,10 @@ class Station:
                                      wavelength_nm=config.station.wavelength_nm,
                                      max_age_s=config.station.max_result_age_s,
                                      timeout_s=config.plc.link.io_timeout_s * 4,
-                                     heartbeat_period_s=heartbeat_period_s)
+                                     heartbeat_period_s=heartbeat_period_s,
+                                     spec_configured=self._surface is not None
+                                     and self._surface.request.tolerance is not None,
+                                     surface_factor=config.surface.surface_factor if self._surface else None)
             self._slice_s = min(_MAX_WAIT_SLICE_S, heartbeat_period_s)
 
     def _make_source(self) -> CarrierSource | PhaseStepSource:
@@ -387,7 +390,7 @@ class Station:
         now_ns = time.time_ns()
         result = StationResult.invalid(index, f"device: {error}", self._counters()[0],
                                        ordering=self._config.processing.ordering, exposure_time_ns=now_ns)
-        return with_output(result, self._output.device_lost(f"device: {error}", now_ns)
+        return with_output(result, self._output.device_lost(f"device: {error}", now_ns, index)
                            if self._output is not None else None)
 
 
