@@ -1,4 +1,5 @@
-"""The simulated bench's tables of a station file: ``[optic]`` (with ``[optic.aperture]``, ``[optic.surface]``), ``[bench]``, ``[lenslets]``.
+"""The simulated bench's tables of a station file: ``[optic]`` (with ``[optic.aperture]``, ``[optic.surface]``,
+``[optic.reference]``), ``[bench]``, ``[lenslets]``.
 
 What a station file may say about the test optic, the piezo's coupling to the fringes and the
 lenslet array of a simulated Shack-Hartmann camera: settings only, with the bounds a key must
@@ -16,7 +17,7 @@ from typing import Literal
 from wavestack.config.schema import setting
 
 __all__ = ["ApertureShapeSettings", "BenchSimulatorSettings", "LensletSimulatorSettings", "OpticSimulatorSettings",
-           "SurfaceSimulatorSettings"]
+           "ReferenceSimulatorSettings", "SurfaceSimulatorSettings"]
 
 BitDepth = Literal[8, 12, 16]
 
@@ -51,6 +52,16 @@ class SurfaceSimulatorSettings:
 
 
 @dataclass(frozen=True)
+class ReferenceSimulatorSettings:
+    """``[optic.reference]``: the interferometer's reference error, nm of wavefront, fixed in the camera's frame."""
+
+    zernike_nm: tuple[float, ...] = setting((), doc="Noll c1, c2, ... of the reference's error, nm of wavefront")
+    map_file: str | None = setting(None, doc="a measured map (.dat, .datx, 4D .h5, .npy in nm)")
+    map_rms_nm: float | None = setting(None, minimum=0.0, doc="scale the map to this RMS, nm")
+    wavelength_nm: float = setting(632.8, minimum=0.0, doc="default: [station] wavelength_nm")
+
+
+@dataclass(frozen=True)
 class OpticSimulatorSettings:
     """``[optic]``: the simulated test optic, its fringes and how the camera sees them."""
 
@@ -68,6 +79,7 @@ class OpticSimulatorSettings:
     bit_depth: BitDepth = 12
     seed: int = setting(0, minimum=0)
     surface: SurfaceSimulatorSettings | None = None
+    reference: ReferenceSimulatorSettings | None = None
 
 
 @dataclass(frozen=True)

@@ -157,25 +157,29 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
 
 def _simulated_surface(optic: OpticSimulatorSettings, table: Mapping[str, Any], station: StationSettings,
                        source: str) -> OpticSimulatorSettings:
-    """``optic`` with ``[optic.surface]`` completed: the map file found, the wavelength the station's."""
-    surface = optic.surface
-    if surface is None:
-        return optic
-    given = table["surface"]  # parse_section has checked it is a table
+    """``optic`` with ``[optic.surface]`` and ``[optic.reference]`` completed: map files found, the station's wavelength."""
+    changes = {name: _completed(getattr(optic, name), table, name, station, source)
+               for name in ("surface", "reference") if getattr(optic, name) is not None}
+    return dataclasses.replace(optic, **changes)
+
+
+def _completed(sub: Any, table: Mapping[str, Any], name: str, station: StationSettings, source: str) -> Any:
+    """A sub-table of ``[optic]`` (surface or reference) with its map file found and the station's wavelength."""
+    given = table[name]  # parse_section has checked it is a table
     changes: dict[str, Any] = {}
     if "wavelength_nm" not in given:
         changes["wavelength_nm"] = station.wavelength_nm
-    elif surface.wavelength_nm != station.wavelength_nm:
-        raise ConfigError(f"{source}: [optic.surface] wavelength_nm = {surface.wavelength_nm:g} does not match "
+    elif sub.wavelength_nm != station.wavelength_nm:
+        raise ConfigError(f"{source}: [optic.{name}] wavelength_nm = {sub.wavelength_nm:g} does not match "
                           f"[station] wavelength_nm = {station.wavelength_nm:g}; expected the same or no key")
-    if surface.map_file is not None:
-        path = Path(surface.map_file)
+    if sub.map_file is not None:
+        path = Path(sub.map_file)
         if not path.is_absolute():
             path = Path(source).parent / path
         if not path.is_file():
-            raise ConfigError(f"{source}: [optic.surface] map_file = {surface.map_file!r}: no such file ({path})")
+            raise ConfigError(f"{source}: [optic.{name}] map_file = {sub.map_file!r}: no such file ({path})")
         changes["map_file"] = str(path)
-    return dataclasses.replace(optic, surface=dataclasses.replace(surface, **changes))
+    return dataclasses.replace(sub, **changes)
 
 
 def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: StationSettings,
