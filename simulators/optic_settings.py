@@ -8,12 +8,11 @@ meaning of the coefficients and the intensity model are described in
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Literal
 
 from wavestack.simulators._checks import check_bit_depth, check_seed, finite_number, nonnegative_number, number_pair
 from wavestack.simulators.aperture_shape import ApertureShape
-from wavestack.simulators.surface_settings import MAP_FILE_SUFFIXES, SurfaceSettings
+from wavestack.simulators.surface_settings import SurfaceSettings, check_figure_sources
 
 BitDepth = Literal[8, 12, 16]
 
@@ -56,17 +55,7 @@ class ReferenceSettings:
     wavelength_nm: float = 632.8
 
     def __post_init__(self) -> None:
-        for index, value in enumerate(self.zernike_nm):
-            finite_number(value, f"zernike_nm[{index}]")
-        if self.map_file is not None:
-            if not isinstance(self.map_file, str) or not self.map_file:
-                raise ValueError(f"map_file: expected a file name, got {self.map_file!r}")
-            if Path(self.map_file).suffix.lower() not in MAP_FILE_SUFFIXES:
-                raise ValueError(f"map_file: expected a {', '.join(MAP_FILE_SUFFIXES)} file, got {self.map_file!r}")
-        if self.map_rms_nm is not None:
-            if self.map_file is None:
-                raise ValueError("map_rms_nm: given without map_file; expected both or neither")
-            nonnegative_number(self.map_rms_nm, "map_rms_nm")
+        check_figure_sources(self.zernike_nm, self.map_file, self.map_rms_nm)
         finite_number(self.wavelength_nm, "wavelength_nm", above=0.0)
 
     @property

@@ -8,9 +8,15 @@ the average is known:
 * for each coefficient ``j``, the median ``med_j`` and the scaled MAD
   ``s_j = 1.4826 median_k |c_kj - med_j|`` over the ``K`` measurements (1.4826 makes the MAD the
   standard deviation of a normal distribution);
-* a measurement's score is ``max_j |c_kj - med_j| / s_j``; it is rejected when the score exceeds
-  ``threshold`` (default 5). One coefficient far off is enough: a vibration burst during a
-  phase-shifting set throws the tilts and a ripple, a fringe-order jump throws many terms at once;
+* each measurement's distance from the median, ``r_k = sqrt(mean_j ((c_kj - med_j) / s_j)^2)``;
+* its score, how far that distance lies out among the others' by the same rule,
+  ``(r_k - median(r)) / (1.4826 MAD(r))``; it is rejected when the score exceeds ``threshold``
+  (default 5). One coefficient far off is enough to move ``r_k``: a vibration burst during a
+  phase-shifting set throws the tilts and a ripple, a fringe-order jump throws many terms at once.
+  The second level matters for few measurements: with ``K = 6`` a coefficient's MAD is often a
+  third of its spread, which would make a clean measurement's largest ``|c - med| / s`` over 36 terms
+  look like an outlier; it inflates every measurement's distance alike, and the rule judges the
+  distances against each other;
 * the average of the kept measurements, the standard error of each coefficient ``std_j / sqrt(n)``
   (``ddof = 1``), the covariance of the average (the sample covariance over ``n``) and, with maps,
   the per-pixel mean and standard error over the kept maps that measured that pixel.
@@ -39,8 +45,7 @@ __all__ = ["DEFAULT_THRESHOLD", "MAD_SCALE", "RobustAverage", "TooFewMeasurement
 
 #: The MAD times this is the standard deviation of a normal distribution (1 / Phi^-1(3/4)).
 MAD_SCALE = 1.4826
-#: Rejection threshold in scaled MADs: a clean normal measurement of 36 terms exceeds it in about
-#: 2e-5 of maps (36 x 5.7e-7).
+#: Rejection threshold in scaled MADs of the measurements' distances (module notes).
 DEFAULT_THRESHOLD = 5.0
 _MAD_FLOOR = 1e-9  # of the largest coefficient magnitude (module notes)
 
@@ -71,7 +76,8 @@ class RobustAverage:
     rejected : tuple of int
         Indices of the measurements rejected.
     scores : ndarray, shape (K,)
-        Each measurement's score, the largest ``|c - median| / scaled MAD`` over its coefficients.
+        Each measurement's score (module notes): how many scaled MADs its distance from the median
+        lies beyond the measurements' median distance.
     threshold : float
         The score above which a measurement was rejected.
     """
@@ -166,12 +172,15 @@ def robust_average(
 
 
 def mad_scores(coefficients: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Each row's largest ``|c - median| / (1.4826 MAD)`` over the columns, shape (K,) (module notes)."""
+    """Each row's score (module notes): its MAD-scaled distance from the median, against the other rows', shape (K,)."""
     median = np.median(coefficients, axis=0)
     deviation = np.abs(coefficients - median)
-    scale = MAD_SCALE * np.median(deviation, axis=0)
     floor = _MAD_FLOOR * max(float(np.max(np.abs(coefficients))), np.finfo(np.float64).tiny)
-    return np.max(deviation / np.maximum(scale, floor), axis=1)
+    scale = np.maximum(MAD_SCALE * np.median(deviation, axis=0), floor)
+    distance = np.sqrt(np.mean((deviation / scale) ** 2, axis=1))
+    centre = np.median(distance)
+    spread = max(MAD_SCALE * float(np.median(np.abs(distance - centre))), _MAD_FLOOR * max(float(centre), 1.0))
+    return (distance - centre) / spread
 
 
 def _map_statistics(maps: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
