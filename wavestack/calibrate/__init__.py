@@ -8,6 +8,14 @@ uses the station service and the pipeline, and none of them.
 
 from __future__ import annotations
 
-from .rotation import CalibrationFailed, PositionRecord, RotationCalibration, RotationSettings, calibrate_rotation
+from .rotation import (
+    CalibrationFailed,
+    PositionRecord,
+    RotationCalibration,
+    RotationSettings,
+    calibrate_rotation,
+    reference_calibration,
+)
 
-__all__ = ["CalibrationFailed", "PositionRecord", "RotationCalibration", "RotationSettings", "calibrate_rotation"]
+__all__ = ["CalibrationFailed", "PositionRecord", "RotationCalibration", "RotationSettings", "calibrate_rotation",
+           "reference_calibration"]

@@ -5,7 +5,8 @@ of N equally spaced positions ``start + k 360 / N`` the calibration moves the st
 waits ``settle_s`` and takes ``maps_per_position`` valid maps in a row from the running station
 (:class:`~wavestack.station.LiveMaps`), all exposed after the stage arrived. Each map is fitted on
 one fixed aperture (the first position's measured pixels less ``edge_px`` rim pixels) in circle
-Zernike polynomials over the aperture's enclosing circle, whose centre is taken as the mount's axis;
+Zernike polynomials over the measured region's enclosing circle (rim included), whose centre is
+taken as the mount's axis;
 the maps of a position are averaged robustly in that basis
 (:func:`~wavestack.pipeline.averaging.robust_average`: outliers rejected and named, the covariance
 of the mean kept), and the positions are separated by
@@ -37,12 +38,13 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from wavestack.drivers.errors import DeviceError
-from wavestack.pipeline import build_fitter
+from wavestack.pipeline import Aperture, build_fitter, zernike_basis
 from wavestack.pipeline.averaging import DEFAULT_THRESHOLD, RobustAverage, TooFewMeasurements, robust_average
-from wavestack.pipeline.calibration import RotationSolution, solve_rotation_test
+from wavestack.pipeline.calibration import ReferenceCalibration, RotationSolution, solve_rotation_test
 from wavestack.station.live_maps import MapSample, UntrustedMeasurement
 
-__all__ = ["CalibrationFailed", "PositionRecord", "RotationCalibration", "RotationSettings", "calibrate_rotation"]
+__all__ = ["CalibrationFailed", "PositionRecord", "RotationCalibration", "RotationSettings", "calibrate_rotation",
+           "reference_calibration"]
 
 logger = logging.getLogger(__name__)
 
@@ -222,7 +224,8 @@ def calibrate_rotation(maps: MapSource, stage: RotaryStage, settings: RotationSe
             on_arrival()
         stack = _maps(maps, settings, stop, where)
         if fitter is None:
-            fitter = build_fitter(_fixed_aperture(stack, settings.edge_px), "circle", settings.modes, dtype=np.float64)
+            mask, pupil = _fixed_aperture(stack, settings.edge_px)
+            fitter = build_fitter(mask, "circle", settings.modes, pupil=pupil, dtype=np.float64)
         average = _position_average(fitter, stack, settings, where)
         records.append(PositionRecord(index, target, angle, average))
         logger.info("rotation calibration: %s at %.4f deg, %d map(s) kept, rejected %s", where, angle,
@@ -251,15 +254,26 @@ def _maps(maps: MapSource, settings: RotationSettings, stop: threading.Event, wh
     return np.stack([np.asarray(sample.waves, dtype=np.float64) for sample in samples])
 
 
-def _fixed_aperture(stack: NDArray[np.float64], edge_px: int) -> NDArray[np.bool_]:
+def _fixed_aperture(stack: NDArray[np.float64],
+                    edge_px: int) -> tuple[NDArray[np.bool_], tuple[float, float, float]]:
+    """The fixed aperture (the largest measured region less its rim) and the basis's pupil: the whole region's circle.
+
+    The pupil encloses the measured region with its rim, so that the calibration's disk covers every
+    pixel a later measurement's detected aperture holds.
+    """
     measured = np.all(np.isfinite(stack), axis=0)
-    if edge_px > 0:
-        measured = ndimage.binary_erosion(measured, structure=np.ones((3, 3), bool), iterations=edge_px)
     labels, count = ndimage.label(measured)
     if count == 0:
-        raise CalibrationFailed("position 1: the maps leave no aperture to fit after the rim is taken off")
+        raise CalibrationFailed("position 1: the maps measure no pixel")
     sizes = ndimage.sum_labels(measured, labels, index=np.arange(1, count + 1))
-    return labels == 1 + int(np.argmax(sizes))  # the aperture: the largest measured region
+    region = labels == 1 + int(np.argmax(sizes))
+    pupil = Aperture.from_mask(region).enclosing_circle()
+    mask = region
+    if edge_px > 0:
+        mask = ndimage.binary_erosion(region, structure=np.ones((3, 3), bool), iterations=edge_px)
+    if not mask.any():
+        raise CalibrationFailed("position 1: the maps leave no aperture to fit after the rim is taken off")
+    return mask, pupil
 
 
 def _position_average(fitter, stack: NDArray[np.float64], settings: RotationSettings,  # noqa: ANN001
@@ -307,3 +321,29 @@ def _without(solution: RotationSolution, keep: NDArray[np.float64]) -> RotationS
         resolved=solution.resolved & (keep > 0), unresolved_orders=solution.unresolved_orders,
         part_covariance=solution.part_covariance * outer, reference_covariance=solution.reference_covariance * outer,
     )
+
+
+def reference_calibration(calibration: RotationCalibration, wavelength_nm: float,
+                          date_utc: str) -> ReferenceCalibration:
+    """The stored form of a rotation calibration's reference (its error over the pupil's whole disk).
+
+    The separated coefficients are evaluated on every pixel of the basis's disk, so a measurement
+    whose detected aperture keeps the rim pixels the calibration left out is corrected there too;
+    the standard error per pixel is ``sqrt(b^T C b)`` with ``b`` the basis at the pixel.
+    """
+    rows, cols = calibration.mask.shape
+    cx, cy, radius = calibration.pupil
+    row, col = np.indices((rows, cols), dtype=np.float64)
+    u, v = (col - cx) / radius, (cy - row) / radius
+    disk = u**2 + v**2 <= (1.0 + 0.5 / radius) ** 2
+    basis = zernike_basis(calibration.modes, u[disk], v[disk])
+    solution = calibration.solution
+    reference = np.full((rows, cols), np.nan)
+    reference[disk] = basis @ solution.reference
+    stderr = np.full((rows, cols), np.nan)
+    stderr[disk] = np.sqrt(np.clip(np.einsum("pi,ij,pj->p", basis, solution.reference_covariance, basis), 0.0, None))
+    return ReferenceCalibration(
+        method="rotation", positions=solution.positions, date_utc=date_utc, wavelength_nm=float(wavelength_nm),
+        grid=(rows, cols), pupil=calibration.pupil, modes=calibration.modes,
+        unresolved_orders=solution.unresolved_orders, mask=calibration.mask, coefficients=solution.reference,
+        covariance=solution.reference_covariance, reference_waves=reference, reference_stderr_waves=stderr)

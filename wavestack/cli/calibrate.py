@@ -7,7 +7,8 @@ rotation stage, both started by the command. It turns the part to N equally spac
 reference's in the fitted basis, and prints the reference's and the part's RMS with their
 uncertainty, the orders it cannot separate (0 and multiples of N), and per position the angle read
 back and the maps rejected; with a simulated station also the error of both against the simulator's
-truth. ``--json`` prints one JSON object instead.
+truth. ``--json`` prints one JSON object instead. ``--out CAL.h5`` writes the reference's calibration
+(:mod:`wavestack.pipeline.calibration.stored`), only once the calibration succeeded.
 
 Exit status: 0 with the answer; 3 when the calibration fails (the stage stalls, refuses or is lost,
 the station gives no trusted maps; one line names the position and the reason, nothing is written);
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import datetime
 import sys
 import threading
 from contextlib import ExitStack
@@ -25,14 +27,22 @@ from pathlib import Path
 
 import numpy as np
 
-from wavestack.calibrate import CalibrationFailed, RotationCalibration, RotationSettings, calibrate_rotation
+from wavestack.calibrate import (
+    CalibrationFailed,
+    RotationCalibration,
+    RotationSettings,
+    calibrate_rotation,
+    reference_calibration,
+)
 from wavestack.cli.arguments import finite_float, positive_int
 from wavestack.cli.command import Command
-from wavestack.cli.outputs import json_text
+from wavestack.cli.outputs import check_output_file, json_text
 from wavestack.cli.signals import stop_on_signals
 from wavestack.config.hexapod import build_hexapod
 from wavestack.config.rotation_stage import load_rotation_stage_config
 from wavestack.config.station import load_station_config
+from wavestack.pipeline import InputError
+from wavestack.pipeline.calibration import write_calibration
 from wavestack.station import StationService
 
 __all__ = ["COMMAND", "rotation_report"]
@@ -61,6 +71,8 @@ def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
                           help="maps count only if exposed this long after the stage arrived (default 0.2)")
     rotation.add_argument("--modes", type=positive_int, default=36, metavar="J", help="Noll terms fitted (default 36)")
     rotation.add_argument("--edge-px", type=int, default=2, metavar="PX", help="rim pixels left out (default 2)")
+    rotation.add_argument("--out", type=Path, metavar="CAL.h5",
+                          help="write the reference's calibration (HDF5, with its content hash); never overwritten")
     rotation.add_argument("--json", action="store_true", help="print one JSON object")
 
 
@@ -71,6 +83,11 @@ def run_calibrate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
                                     settle_s=args.settle_s, modes=args.modes, edge_px=args.edge_px)
     except ValueError as error:
         parser.error(str(error))
+    out = None
+    if args.out is not None:
+        out = check_output_file(args.out, "--out")
+        if out.exists():
+            raise InputError(f"{out}: exists already; --out never overwrites a calibration")
     station_config = load_station_config(args.config or CALIBRATION_STATION)
     stage_config = load_rotation_stage_config(args.stage)
     stop = threading.Event()
@@ -99,6 +116,10 @@ def run_calibrate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
         report = rotation_report(calibration, wavelength)
         if truth is not None:
             report["truth"] = truth(calibration, wavelength)
+        if out is not None:
+            date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+            stored = write_calibration(out, reference_calibration(calibration, wavelength, date))
+            report["calibration_file"] = {"path": str(out), "sha256": stored.digest}
     print(json_text(report) if args.json else _text(report))
     return 0
 
@@ -132,6 +153,9 @@ def _text(report: dict[str, object]) -> str:
     for index, position in enumerate(report["positions_measured"]):  # type: ignore[arg-type]
         lines.append(f"  position {index + 1}: {position['angle_deg']:.4f} deg, {position['kept']} map(s) kept, "
                      f"rejected {position['rejected'] or 'none'}")
+    written = report.get("calibration_file")
+    if isinstance(written, dict):
+        lines.append(f"  calibration written: {written['path']} (sha256 {written['sha256'][:12]})")
     truth = report.get("truth")
     if isinstance(truth, dict):
         lines.append(f"  against the simulator's truth: part {truth['part_error_nm_rms']:.3f} nm RMS, reference "

@@ -52,6 +52,7 @@ from wavestack.config.shack_hartmann import ShackHartmannSettings
 from wavestack.config.simulated_bench import BenchSimulatorSettings, LensletSimulatorSettings, OpticSimulatorSettings
 from wavestack.config.station_rules import check_station_rules
 from wavestack.config.station_schema import OutputSettings, StationConfig, StationSettings
+from wavestack.pipeline.calibration import CalibrationRefused, read_calibration
 
 _TABLES = ("station", "processing", "camera", "pzt", "plc", "outputs", "optic", "bench", "shack_hartmann",
            "lenslets", "surface")
@@ -114,6 +115,9 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
     )
     config.surface.request(source)  # a tolerance that cannot be read is refused with the file
     check_station_rules(config)
+    if config.processing.calibration is not None:
+        path = Path(config.processing.calibration)
+        config = with_calibration(config, path if path.is_absolute() else Path(source).parent / path)
     return config
 
 
@@ -215,3 +219,30 @@ def load_station_config(path: str | Path | None = None) -> StationConfig:
     """Read and check a station file (None: the packaged ``default.toml``, the simulated station)."""
     path = DEFAULT_CONFIG if path is None else Path(path)
     return parse_station_config(read_config_text(path), source=str(path))
+
+
+def with_calibration(config: StationConfig, path: str | Path) -> StationConfig:
+    """The station with the reference calibration of ``path`` read, checked and in force.
+
+    The file must be whole (its content hash), of the station's wavelength and, for a simulated
+    camera, of its grid (a real camera's grid is checked on every set: a set of another grid or
+    aperture is an invalid result naming why).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the station file, the calibration and the reason.
+    """
+    if config.station.kind != "interferometer":
+        raise ConfigError(f"{config.source}: [processing] calibration: a reference calibration applies to an "
+                          "interferometer station")
+    try:
+        calibration = read_calibration(path)
+        calibration.check_measurement(calibration.grid, config.station.wavelength_nm)
+        if config.camera.simulated:
+            sim = config.camera_simulator
+            calibration.check_measurement((sim.height, sim.width))
+    except CalibrationRefused as error:
+        raise ConfigError(f"{config.source}: [processing] calibration: {error}") from None
+    processing = dataclasses.replace(config.processing, calibration=str(path))
+    return dataclasses.replace(config, processing=processing, calibration=calibration)
