@@ -63,7 +63,9 @@ With ``settings.reference`` the interferometer's reference carries a figure erro
 (:class:`~wavestack.simulators.optic_settings.ReferenceSettings`), added to every frame on the
 aperture's disk in the camera's frame. :meth:`TestOptic.rotate_part` turns the part's Zernike
 figure on its mount about the disk's centre (a rotary mount centred on the pupil); the reference
-does not turn. The truth keeps both apart: ``OpticTruth.coefficients_waves`` are the part's own
+does not turn. With ``settings.ball`` a calibration ball sits at the confocal position
+(:mod:`~wavestack.simulators.calibration_ball`); :meth:`TestOptic.reseat_ball` turns it to a random
+orientation. The truth keeps part and reference apart: ``OpticTruth.coefficients_waves`` are the part's own
 (unturned) terms, ``reference_waves`` the reference's map, ``wavefront_waves`` their sum as seen.
 
 Speed. The wavefront is linear in time, ``W(t) = B (c + t d) = W0 + t D`` with ``B`` the basis
@@ -92,6 +94,7 @@ from numpy.typing import NDArray
 from wavestack.pipeline import mode_list
 from wavestack.simulators._checks import check_image_size, finite_number, read_only
 from wavestack.simulators.aperture_shape import ApertureKind, ApertureShape
+from wavestack.simulators.calibration_ball import BallSettings, CalibrationBall
 from wavestack.simulators.optic_rendering import Rendering, prepare_rendering
 from wavestack.simulators.optic_settings import BitDepth, OpticSettings, ReferenceSettings
 from wavestack.simulators.optic_surface import SurfacePhase, SurfaceView
@@ -99,8 +102,8 @@ from wavestack.simulators.optic_truth import FrameFacts, OpticTruth
 from wavestack.simulators.surface import SurfaceState
 from wavestack.simulators.surface_sources import initial_heights_nm
 
-__all__ = ["ApertureKind", "ApertureShape", "BitDepth", "FrameFacts", "OpticSettings", "OpticTruth", "ReferenceSettings",
-           "TestOptic"]
+__all__ = ["ApertureKind", "ApertureShape", "BallSettings", "BitDepth", "FrameFacts", "OpticSettings", "OpticTruth",
+           "ReferenceSettings", "TestOptic"]
 
 logger = logging.getLogger(__name__)
 
@@ -158,6 +161,7 @@ class TestOptic:
             state = SurfaceState(heights, settings.surface.pixel_mm)
             self._surface = SurfacePhase(state, settings.surface.waves_per_nm)
         self._rotation_deg = 0.0
+        self._ball = None if settings.ball is None else CalibrationBall(settings.ball)
         self._rendering = self._prepare(settings.aperture, revision=0)
 
     # ----------------------------------------------------------------------------- properties
@@ -238,10 +242,20 @@ class TestOptic:
                 self._rendering = rendering
         logger.info("test optic aperture changed to %s (revision %d)", shape.kind, rendering.revision)
 
+    def reseat_ball(self) -> None:
+        """Re-seat the calibration ball at a random orientation (next frame on); ValueError without a ball."""
+        if self._ball is None:
+            raise ValueError("reseat_ball: the optic has no calibration ball (settings.ball)")
+        with self._aperture_lock:
+            self._ball.reseat()
+            rendering = self._prepare(self._rendering.shape, revision=self._rendering.revision + 1)
+            with self._lock:
+                self._rendering = rendering
+
     def _prepare(self, shape: ApertureShape, revision: int) -> Rendering:
         return prepare_rendering(self._settings, self._size, shape, revision, modes=self._modes,
                                  coefficients=self._coefficients, drift=self._drift, rotation_deg=self._rotation_deg,
-                                 with_surface=self._surface is not None)
+                                 with_surface=self._surface is not None, ball=self._ball)
 
     def rotate_part(self, angle_deg: float) -> None:
         """Turn the part on its mount to ``angle_deg`` (absolute, counter-clockwise as displayed).

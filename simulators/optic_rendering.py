@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 from wavestack.pipeline import Aperture, mode_list, zernike_basis
 from wavestack.simulators._checks import read_only
 from wavestack.simulators.aperture_shape import ApertureShape
+from wavestack.simulators.calibration_ball import CalibrationBall
 from wavestack.simulators.optic_settings import OpticSettings, ReferenceSettings
 from wavestack.simulators.surface_sources import measured_surface_nm
 
@@ -50,8 +51,11 @@ class Rendering:
 
 def prepare_rendering(settings: OpticSettings, size: tuple[int, int], shape: ApertureShape, revision: int, *,
                       modes: tuple[tuple[int, int], ...], coefficients: NDArray[np.float64],
-                      drift: NDArray[np.float64] | None, rotation_deg: float, with_surface: bool) -> Rendering:
+                      drift: NDArray[np.float64] | None, rotation_deg: float, with_surface: bool,
+                      ball: CalibrationBall | None = None) -> Rendering:
     """Everything a frame on ``shape`` needs, with the part turned by ``rotation_deg`` (module notes).
+
+    ``ball``: a calibration ball in its current seating, whose cap adds to the wavefront.
 
     Raises
     ------
@@ -77,6 +81,8 @@ def prepare_rendering(settings: OpticSettings, size: tuple[int, int], shape: Ape
         reference_map = np.full((height, width), np.nan)
         reference_map[rows, cols] = reference
         reference_map = read_only(reference_map)
+    if ball is not None:
+        products[:, 0] += ball.cap_nm(u, v) / ball.settings.wavelength_nm
     maps = []
     for k in range(len(vectors)):
         values = np.full((height, width), np.nan)

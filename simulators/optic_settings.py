@@ -12,6 +12,7 @@ from typing import Literal
 
 from wavestack.simulators._checks import check_bit_depth, check_seed, finite_number, nonnegative_number, number_pair
 from wavestack.simulators.aperture_shape import ApertureShape
+from wavestack.simulators.calibration_ball import BallSettings
 from wavestack.simulators.surface_settings import SurfaceSettings, check_figure_sources
 
 BitDepth = Literal[8, 12, 16]
@@ -103,6 +104,9 @@ class OpticSettings:
     reference : ReferenceSettings or None
         The interferometer's reference error, added to every frame in the camera's frame (it does
         not turn with the part); None: a perfect reference.
+    ball : BallSettings or None
+        A calibration ball at the confocal position (the random ball test): its figure, in the
+        current seating, adds to the wavefront (the part's terms are then normally zero).
 
     Raises
     ------
@@ -124,6 +128,7 @@ class OpticSettings:
     seed: int = 0
     surface: SurfaceSettings | None = None
     reference: ReferenceSettings | None = None
+    ball: BallSettings | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.aperture, ApertureShape):
@@ -148,6 +153,8 @@ class OpticSettings:
             raise ValueError(f"surface: expected SurfaceSettings or None, got {type(self.surface).__name__}")
         if self.reference is not None and not isinstance(self.reference, ReferenceSettings):
             raise ValueError(f"reference: expected ReferenceSettings or None, got {type(self.reference).__name__}")
+        if self.ball is not None and not isinstance(self.ball, BallSettings):
+            raise ValueError(f"ball: expected BallSettings or None, got {type(self.ball).__name__}")
 
     @property
     def full_scale(self) -> int:

@@ -21,6 +21,9 @@ the average is known:
   (``ddof = 1``), the covariance of the average (the sample covariance over ``n``) and, with maps,
   the per-pixel mean and standard error over the kept maps that measured that pixel.
 
+With fewer than :data:`MIN_FOR_REJECTION` (5) measurements nothing is rejected: the median and the
+MAD of three or four values cannot tell an outlier from the spread.
+
 The scores come from the coefficients only: the basis is the compact, well-conditioned description
 of a map, so the rule costs ``K x M`` numbers whatever the map size. Where a coefficient does not
 vary at all (a removed piston), its MAD is zero; a floor of ``1e-9`` of the coefficients' largest
@@ -47,6 +50,8 @@ __all__ = ["DEFAULT_THRESHOLD", "MAD_SCALE", "RobustAverage", "TooFewMeasurement
 MAD_SCALE = 1.4826
 #: Rejection threshold in scaled MADs of the measurements' distances (module notes).
 DEFAULT_THRESHOLD = 5.0
+#: Fewest measurements the rule judges: the MAD of fewer is too unstable to reject on (they are averaged whole).
+MIN_FOR_REJECTION = 5
 _MAD_FLOOR = 1e-9  # of the largest coefficient magnitude (module notes)
 
 
@@ -151,7 +156,7 @@ def robust_average(
     if count < min_kept:
         raise TooFewMeasurements(f"coefficients: {count} measurements, at least {min_kept} needed")
     scores = mad_scores(values)
-    keep = scores <= threshold
+    keep = scores <= threshold if count >= MIN_FOR_REJECTION else np.ones(count, dtype=bool)
     kept = tuple(int(k) for k in np.flatnonzero(keep))
     if len(kept) < min_kept:
         raise TooFewMeasurements(

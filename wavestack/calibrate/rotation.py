@@ -26,31 +26,33 @@ does not cover the aperture. :class:`CalibrationFailed` says which, at which pos
 from __future__ import annotations
 
 import logging
-import math
 import threading
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
+from wavestack.calibrate.measure import (
+    CalibrationFailed,
+    MapSource,
+    alignment_free,
+    basis_fitter,
+    check_fields,
+    position_average,
+    stored_reference,
+    take_maps,
+)
 from wavestack.drivers.errors import DeviceError
-from wavestack.pipeline import Aperture, build_fitter, zernike_basis
-from wavestack.pipeline.averaging import DEFAULT_THRESHOLD, RobustAverage, TooFewMeasurements, robust_average
+from wavestack.pipeline import Fitter
+from wavestack.pipeline.averaging import DEFAULT_THRESHOLD, RobustAverage
 from wavestack.pipeline.calibration import ReferenceCalibration, RotationSolution, solve_rotation_test
-from wavestack.station.live_maps import MapSample, UntrustedMeasurement
 
 __all__ = ["CalibrationFailed", "PositionRecord", "RotationCalibration", "RotationSettings", "calibrate_rotation",
            "reference_calibration"]
 
 logger = logging.getLogger(__name__)
-
-
-class CalibrationFailed(RuntimeError):
-    """The calibration stopped before its answer; the message names the position and the reason."""
 
 
 class RotaryStage(Protocol):
@@ -61,13 +63,6 @@ class RotaryStage(Protocol):
     def move_absolute(self, pose: Mapping[str, float]) -> object: ...
 
     def wait_on_target(self, timeout_s: float) -> dict[str, float]: ...
-
-
-class MapSource(Protocol):
-    """The station's maps (:class:`~wavestack.station.LiveMaps`)."""
-
-    def collect(self, count: int, *, max_results: int, not_before_ns: int, timeout_s: float,
-                stop: threading.Event) -> list[MapSample]: ...
 
 
 @dataclass(frozen=True)
@@ -114,17 +109,11 @@ class RotationSettings:
     threshold_mad: float = DEFAULT_THRESHOLD
 
     def __post_init__(self) -> None:
-        for name, low in (("positions", 2), ("maps_per_position", 3), ("edge_px", 0), ("modes", 3)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ValueError(f"{name}: expected an integer >= {low}, got {value!r}")
-        for name in ("start_deg", "settle_s", "measure_timeout_s", "move_timeout_s", "threshold_mad"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value)):
-                raise ValueError(f"{name}: expected a finite number, got {value!r}")
-        if self.settle_s < 0 or self.measure_timeout_s <= 0 or self.move_timeout_s <= 0 or self.threshold_mad <= 0:
-            raise ValueError("settle_s >= 0, measure_timeout_s > 0, move_timeout_s > 0 and threshold_mad > 0 expected, "
-                             f"got {self.settle_s}, {self.measure_timeout_s}, {self.move_timeout_s}, {self.threshold_mad}")
+        check_fields(self, (("positions", 2), ("maps_per_position", 3), ("edge_px", 0), ("modes", 3)),
+                     ("start_deg",), ("settle_s", "measure_timeout_s", "move_timeout_s", "threshold_mad"))
+        if self.measure_timeout_s <= 0 or self.move_timeout_s <= 0 or self.threshold_mad <= 0:
+            raise ValueError("measure_timeout_s, move_timeout_s and threshold_mad: expected > 0, got "
+                             f"{self.measure_timeout_s}, {self.move_timeout_s}, {self.threshold_mad}")
         if self.direction not in (1, -1):
             raise ValueError(f"direction: expected 1 or -1, got {self.direction!r}")
 
@@ -222,11 +211,10 @@ def calibrate_rotation(maps: MapSource, stage: RotaryStage, settings: RotationSe
         angle = _turn(stage, axis, target, settings.move_timeout_s, where)
         if on_arrival is not None:
             on_arrival()
-        stack = _maps(maps, settings, stop, where)
+        stack = take_maps(maps, settings.maps_per_position, settings.settle_s, settings.measure_timeout_s, stop, where)
         if fitter is None:
-            mask, pupil = _fixed_aperture(stack, settings.edge_px)
-            fitter = build_fitter(mask, "circle", settings.modes, pupil=pupil, dtype=np.float64)
-        average = _position_average(fitter, stack, settings, where)
+            fitter = basis_fitter(stack, settings.edge_px, settings.modes)
+        average = position_average(fitter, stack, settings.threshold_mad, where)
         records.append(PositionRecord(index, target, angle, average))
         logger.info("rotation calibration: %s at %.4f deg, %d map(s) kept, rejected %s", where, angle,
                     average.count, list(average.rejected))
@@ -243,62 +231,12 @@ def _turn(stage: RotaryStage, axis: str, target: float, timeout_s: float, where:
         raise CalibrationFailed(f"{where}: the rotation stage: {error}") from None
 
 
-def _maps(maps: MapSource, settings: RotationSettings, stop: threading.Event, where: str) -> NDArray[np.float64]:
-    after = time.time_ns() + int(round(settings.settle_s * 1e9))
-    count = settings.maps_per_position
-    try:
-        samples = maps.collect(count, max_results=4 * count, not_before_ns=after,
-                               timeout_s=settings.measure_timeout_s + settings.settle_s, stop=stop)
-    except UntrustedMeasurement as error:
-        raise CalibrationFailed(f"{where}: no trusted maps: {error}") from None
-    return np.stack([np.asarray(sample.waves, dtype=np.float64) for sample in samples])
-
-
-def _fixed_aperture(stack: NDArray[np.float64],
-                    edge_px: int) -> tuple[NDArray[np.bool_], tuple[float, float, float]]:
-    """The fixed aperture (the largest measured region less its rim) and the basis's pupil: the whole region's circle.
-
-    The pupil encloses the measured region with its rim, so that the calibration's disk covers every
-    pixel a later measurement's detected aperture holds.
-    """
-    measured = np.all(np.isfinite(stack), axis=0)
-    labels, count = ndimage.label(measured)
-    if count == 0:
-        raise CalibrationFailed("position 1: the maps measure no pixel")
-    sizes = ndimage.sum_labels(measured, labels, index=np.arange(1, count + 1))
-    region = labels == 1 + int(np.argmax(sizes))
-    pupil = Aperture.from_mask(region).enclosing_circle()
-    mask = region
-    if edge_px > 0:
-        mask = ndimage.binary_erosion(region, structure=np.ones((3, 3), bool), iterations=edge_px)
-    if not mask.any():
-        raise CalibrationFailed("position 1: the maps leave no aperture to fit after the rim is taken off")
-    return mask, pupil
-
-
-def _position_average(fitter, stack: NDArray[np.float64], settings: RotationSettings,  # noqa: ANN001
-                      where: str) -> RobustAverage:
-    mask = fitter.aperture.mask
-    covered = np.isfinite(stack[:, mask]).mean(axis=1)
-    if covered.min() < 0.95:
-        raise CalibrationFailed(f"{where}: a map covers {100 * covered.min():.1f} % of the fixed aperture; "
-                                "expected >= 95 % (the part or the aperture moved?)")
-    coefficients = np.array([fitter.fit(np.where(mask, frame, np.nan), nan_policy="omit").coefficients
-                             for frame in stack])
-    try:
-        return robust_average(coefficients, np.where(mask, stack, np.nan), threshold=settings.threshold_mad)
-    except TooFewMeasurements as error:
-        raise CalibrationFailed(f"{where}: {error}") from None
-
-
-def _answer(fitter, settings: RotationSettings, records: Sequence[PositionRecord]) -> RotationCalibration:  # noqa: ANN001
+def _answer(fitter: Fitter, settings: RotationSettings, records: Sequence[PositionRecord]) -> RotationCalibration:
     modes = tuple(fitter.basis.modes)
     angles = np.deg2rad([settings.direction * (r.angle_deg - settings.start_deg) for r in records])
     solution = solve_rotation_test(modes, np.array([r.average.coefficients for r in records]), angles,
                                    np.array([r.average.coefficient_covariance for r in records]))
-    alignment = np.array([n <= 1 for n, _ in modes])  # piston and tilt (module notes)
-    keep = np.where(alignment, 0.0, 1.0)
-    solution = _without(solution, keep)
+    solution = _without(solution, alignment_free(modes, ()))  # piston and tilt (module notes)
     mask = fitter.aperture.mask
     reference_map = np.where(mask, fitter.surface(solution.reference), np.nan)
     part_map = np.where(mask, fitter.surface(solution.part), np.nan)
@@ -325,25 +263,9 @@ def _without(solution: RotationSolution, keep: NDArray[np.float64]) -> RotationS
 
 def reference_calibration(calibration: RotationCalibration, wavelength_nm: float,
                           date_utc: str) -> ReferenceCalibration:
-    """The stored form of a rotation calibration's reference (its error over the pupil's whole disk).
-
-    The separated coefficients are evaluated on every pixel of the basis's disk, so a measurement
-    whose detected aperture keeps the rim pixels the calibration left out is corrected there too;
-    the standard error per pixel is ``sqrt(b^T C b)`` with ``b`` the basis at the pixel.
-    """
-    rows, cols = calibration.mask.shape
-    cx, cy, radius = calibration.pupil
-    row, col = np.indices((rows, cols), dtype=np.float64)
-    u, v = (col - cx) / radius, (cy - row) / radius
-    disk = u**2 + v**2 <= (1.0 + 0.5 / radius) ** 2
-    basis = zernike_basis(calibration.modes, u[disk], v[disk])
+    """The stored form of a rotation calibration's reference (:func:`~wavestack.calibrate.measure.stored_reference`)."""
     solution = calibration.solution
-    reference = np.full((rows, cols), np.nan)
-    reference[disk] = basis @ solution.reference
-    stderr = np.full((rows, cols), np.nan)
-    stderr[disk] = np.sqrt(np.clip(np.einsum("pi,ij,pj->p", basis, solution.reference_covariance, basis), 0.0, None))
-    return ReferenceCalibration(
-        method="rotation", positions=solution.positions, date_utc=date_utc, wavelength_nm=float(wavelength_nm),
-        grid=(rows, cols), pupil=calibration.pupil, modes=calibration.modes,
-        unresolved_orders=solution.unresolved_orders, mask=calibration.mask, coefficients=solution.reference,
-        covariance=solution.reference_covariance, reference_waves=reference, reference_stderr_waves=stderr)
+    return stored_reference(calibration.mask, calibration.pupil, calibration.modes, solution.reference,
+                            solution.reference_covariance, method="rotation", positions=solution.positions,
+                            unresolved_orders=solution.unresolved_orders, wavelength_nm=wavelength_nm,
+                            date_utc=date_utc)

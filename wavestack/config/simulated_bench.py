@@ -1,5 +1,5 @@
 """The simulated bench's tables of a station file: ``[optic]`` (with ``[optic.aperture]``, ``[optic.surface]``,
-``[optic.reference]``), ``[bench]``, ``[lenslets]``.
+``[optic.reference]``, ``[optic.ball]``), ``[bench]``, ``[lenslets]``.
 
 What a station file may say about the test optic, the piezo's coupling to the fringes and the
 lenslet array of a simulated Shack-Hartmann camera: settings only, with the bounds a key must
@@ -16,7 +16,7 @@ from typing import Literal
 
 from wavestack.config.schema import setting
 
-__all__ = ["ApertureShapeSettings", "BenchSimulatorSettings", "LensletSimulatorSettings", "OpticSimulatorSettings",
+__all__ = ["ApertureShapeSettings", "BallSimulatorSettings", "BenchSimulatorSettings", "LensletSimulatorSettings", "OpticSimulatorSettings",
            "ReferenceSimulatorSettings", "SurfaceSimulatorSettings"]
 
 BitDepth = Literal[8, 12, 16]
@@ -62,6 +62,18 @@ class ReferenceSimulatorSettings:
 
 
 @dataclass(frozen=True)
+class BallSimulatorSettings:
+    """``[optic.ball]``: a calibration ball at the confocal position (the random ball test), re-seated at random."""
+
+    figure_nm: float = setting(10.0, minimum=0.0, doc="the ball's figure over the whole sphere, nm RMS of wavefront")
+    cap_half_angle_deg: float = setting(30.0, minimum=0.0, maximum=90.0, doc="the cap the interferometer sees")
+    terms: int = setting(40, minimum=1, doc="plane waves of the random figure")
+    max_frequency: float = setting(12.0, minimum=1.0, doc="largest spatial frequency, radians per radian")
+    seed: int = setting(0, minimum=0)
+    wavelength_nm: float = setting(632.8, minimum=0.0, doc="default: [station] wavelength_nm")
+
+
+@dataclass(frozen=True)
 class OpticSimulatorSettings:
     """``[optic]``: the simulated test optic, its fringes and how the camera sees them."""
 
@@ -80,6 +92,7 @@ class OpticSimulatorSettings:
     seed: int = setting(0, minimum=0)
     surface: SurfaceSimulatorSettings | None = None
     reference: ReferenceSimulatorSettings | None = None
+    ball: BallSimulatorSettings | None = None
 
 
 @dataclass(frozen=True)

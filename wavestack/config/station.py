@@ -161,14 +161,15 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
 
 def _simulated_surface(optic: OpticSimulatorSettings, table: Mapping[str, Any], station: StationSettings,
                        source: str) -> OpticSimulatorSettings:
-    """``optic`` with ``[optic.surface]`` and ``[optic.reference]`` completed: map files found, the station's wavelength."""
+    """``optic`` with ``[optic.surface]``, ``[optic.reference]``, ``[optic.ball]`` completed: map files found, the
+    station's wavelength."""
     changes = {name: _completed(getattr(optic, name), table, name, station, source)
-               for name in ("surface", "reference") if getattr(optic, name) is not None}
+               for name in ("surface", "reference", "ball") if getattr(optic, name) is not None}
     return dataclasses.replace(optic, **changes)
 
 
 def _completed(sub: Any, table: Mapping[str, Any], name: str, station: StationSettings, source: str) -> Any:
-    """A sub-table of ``[optic]`` (surface or reference) with its map file found and the station's wavelength."""
+    """A sub-table of ``[optic]`` (surface, reference, ball) with its map file found and the station's wavelength."""
     given = table[name]  # parse_section has checked it is a table
     changes: dict[str, Any] = {}
     if "wavelength_nm" not in given:
@@ -176,7 +177,7 @@ def _completed(sub: Any, table: Mapping[str, Any], name: str, station: StationSe
     elif sub.wavelength_nm != station.wavelength_nm:
         raise ConfigError(f"{source}: [optic.{name}] wavelength_nm = {sub.wavelength_nm:g} does not match "
                           f"[station] wavelength_nm = {station.wavelength_nm:g}; expected the same or no key")
-    if sub.map_file is not None:
+    if getattr(sub, "map_file", None) is not None:
         path = Path(sub.map_file)
         if not path.is_absolute():
             path = Path(source).parent / path
