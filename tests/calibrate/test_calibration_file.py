@@ -12,6 +12,7 @@ import pytest
 
 from wavestack.cli import main
 from wavestack.cli.calibrate import CALIBRATION_STATION
+from wavestack.config.rotation_stage import DEFAULT_ROTATION_STAGE
 from wavestack.pipeline.calibration import read_calibration
 from shared_data import DATA
 
@@ -62,6 +63,19 @@ def test_a_calibration_of_another_grid_or_a_tampered_one_is_refused_before_any_d
     assert "changed or damaged since it was written" in capsys.readouterr().err
     assert main(["calibrate", "rotation", "--out", str(calibration_file)]) == 2  # never overwritten
     assert "exists already" in capsys.readouterr().err
+
+
+def test_a_stage_that_refuses_a_position_fails_the_command_and_writes_nothing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    stage = tmp_path / "stage.toml"
+    text = DEFAULT_ROTATION_STAGE.read_text(encoding="utf-8").replace("soft_upper = [370.0]", "soft_upper = [150.0]")
+    stage.write_text(text, encoding="utf-8")
+    out = tmp_path / "cal.h5"
+    assert main(["calibrate", "rotation", "--stage", str(stage), "--maps", "3", "--settle-s", "0",
+                 "--out", str(out)]) == 3
+    error = capsys.readouterr().err
+    assert "position 3 of 4 (180 deg): the rotation stage:" in error and "nothing written" in error, error
+    assert not out.exists() and list(tmp_path.iterdir()) == [stage]
 
 
 def test_analyze_subtracts_the_calibration_from_a_set_of_the_calibrated_grid(

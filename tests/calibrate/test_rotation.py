@@ -119,9 +119,14 @@ def test_a_stalled_stage_or_a_lost_connection_ends_the_calibration_with_the_reas
         assert arrivals == [1]
     with ExitStack() as stack:
         simulated, stage = _stage(_optic(CIRCLE), stack)
-        simulated.simulator.faults.drop_connection(command="MOV")
-        with pytest.raises(CalibrationFailed, match=r"position 1 of 4 \(10 deg\): the rotation stage: "):
-            calibrate_rotation(OpticMaps(optic), stage, settings, on_arrival=simulated.turn_part)
+
+        def lose_the_connection_after_two_positions() -> None:
+            simulated.turn_part()
+            if simulated.optic.part_rotation_deg > 50.0:
+                simulated.simulator.faults.drop_connection(command="MOV")  # the next move is never made
+
+        with pytest.raises(CalibrationFailed, match=r"position 3 of 4 \(190 deg\): the rotation stage: "):
+            calibrate_rotation(OpticMaps(optic), stage, settings, on_arrival=lose_the_connection_after_two_positions)
 
 
 def test_no_trusted_maps_end_the_calibration_with_the_reason() -> None:
