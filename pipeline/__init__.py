@@ -15,7 +15,8 @@ face, stacked so that a lower topic never imports a higher one:
   every command calls (``process(frames) -> outcome``: phase, aperture, unwrap, data-quality mask,
   fit, spike clipping, PV and PVr; spots to slopes to terms), the aperture confirmation table and
   the fitter-source protocol;
-* beside them, needing nothing but the root: :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
+* beside them, needing nothing but the root: :mod:`~wavestack.pipeline.averaging` (robust
+  averaging in the fitted basis: MAD rejection, standard errors, covariance), :mod:`~wavestack.pipeline.polishing` (tool influence, removal,
   dwell grid and surface extension, dwell-time solvers);
 * on top: :mod:`~wavestack.pipeline.surface` (ISO form figures and tolerances, PVr, PSD, slope,
   areal filters: the figures a drawing tolerances).
@@ -39,6 +40,7 @@ from .aperture import (
     compare_apertures,
     detect_aperture,
 )
+from .averaging import RobustAverage, TooFewMeasurements, robust_average
 from .fit import (
     FitBasis,
     FitResult,
@@ -164,6 +166,9 @@ from .zernike import (
 )
 
 __all__ = [
+    "RobustAverage",
+    "TooFewMeasurements",
+    "robust_average",
     "CarrierProcessor",
     "FitSettings",
     "FitterChoice",

@@ -57,6 +57,17 @@ wavelength_nm``, re-made whenever the surface's revision changes
 (:mod:`~wavestack.simulators.optic_surface`). The surface belongs to the optic: a new aperture
 shows another part of the same heights. Without a surface everything is as before.
 
+Reference and rotation
+----------------------
+With ``settings.reference`` the interferometer's reference carries a figure error
+(:class:`~wavestack.simulators.optic_settings.ReferenceSettings`), added to every frame on the
+aperture's disk in the camera's frame. :meth:`TestOptic.rotate_part` turns the part's Zernike
+figure on its mount about the disk's centre (a rotary mount centred on the pupil); the reference
+does not turn. With ``settings.ball`` a calibration ball sits at the confocal position
+(:mod:`~wavestack.simulators.calibration_ball`); :meth:`TestOptic.reseat_ball` turns it to a random
+orientation. The truth keeps part and reference apart: ``OpticTruth.coefficients_waves`` are the part's own
+(unturned) terms, ``reference_waves`` the reference's map, ``wavefront_waves`` their sum as seen.
+
 Speed. The wavefront is linear in time, ``W(t) = B (c + t d) = W0 + t D`` with ``B`` the basis
 on the aperture pixels, so the two products ``B c`` and ``B d`` are made once per aperture (the
 basis is evaluated in blocks and not kept) and a frame costs a few float32 passes: phase,
@@ -80,41 +91,23 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from wavestack.pipeline import Aperture
-from wavestack.pipeline import zernike_basis
 from wavestack.pipeline import mode_list
 from wavestack.simulators._checks import check_image_size, finite_number, read_only
 from wavestack.simulators.aperture_shape import ApertureKind, ApertureShape
-from wavestack.simulators.optic_settings import BitDepth, OpticSettings
+from wavestack.simulators.calibration_ball import BallSettings, CalibrationBall
+from wavestack.simulators.optic_rendering import Rendering, prepare_rendering
+from wavestack.simulators.optic_settings import BitDepth, OpticSettings, ReferenceSettings
 from wavestack.simulators.optic_surface import SurfacePhase, SurfaceView
 from wavestack.simulators.optic_truth import FrameFacts, OpticTruth
 from wavestack.simulators.surface import SurfaceState
 from wavestack.simulators.surface_sources import initial_heights_nm
 
-__all__ = ["ApertureKind", "ApertureShape", "BitDepth", "FrameFacts", "OpticSettings", "OpticTruth", "TestOptic"]
+__all__ = ["ApertureKind", "ApertureShape", "BallSettings", "BitDepth", "FrameFacts", "OpticSettings", "OpticTruth",
+           "ReferenceSettings", "TestOptic"]
 
 logger = logging.getLogger(__name__)
 
-_BASIS_BLOCK = 1 << 15  # aperture pixels per block when evaluating the basis
 _NOISE_POOL_EXTRA = 1 << 18  # spare noise samples: the random offset of a frame's noise slice
-
-
-@dataclass(frozen=True, eq=False)
-class _Rendering:
-    """Everything precomputed for one aperture; replaced whole by ``set_aperture``."""
-
-    shape: ApertureShape
-    revision: int
-    mask: NDArray[np.bool_]
-    pupil: tuple[float, float, float]
-    wavefront: NDArray[np.float64]  # W0 = B c, NaN outside
-    wavefront_drift: NDArray[np.float64] | None  # D = B d, NaN outside
-    phase: NDArray[np.float32]  # 2 pi W0 + carrier modulo 2 pi, radians (finite everywhere)
-    phase_drift: NDArray[np.float32] | None  # 2 pi D, radians per second, 0 outside
-    amplitude: NDArray[np.float32]  # modulation counts inside, 0 outside
-    offset: NDArray[np.float32]  # background counts inside, halo counts outside
-    index: NDArray[np.intp] | None = None  # with a surface: flat indices of the aperture pixels
-    base_phase: NDArray[np.float64] | None = None  # with a surface: 2 pi W0 + carrier there, not wrapped
 
 
 class TestOptic:
@@ -167,6 +160,8 @@ class TestOptic:
             heights = initial_heights_nm(settings.surface, settings.aperture.mask(height, width))
             state = SurfaceState(heights, settings.surface.pixel_mm)
             self._surface = SurfacePhase(state, settings.surface.waves_per_nm)
+        self._rotation_deg = 0.0
+        self._ball = None if settings.ball is None else CalibrationBall(settings.ball)
         self._rendering = self._prepare(settings.aperture, revision=0)
 
     # ----------------------------------------------------------------------------- properties
@@ -193,7 +188,7 @@ class TestOptic:
 
     @property
     def aperture_revision(self) -> int:
-        """0 for the initial aperture, +1 per :meth:`set_aperture`."""
+        """0 for the initial aperture, +1 per :meth:`set_aperture` or :meth:`rotate_part`."""
         return self._rendering.revision
 
     @property
@@ -210,6 +205,11 @@ class TestOptic:
     def mask(self) -> NDArray[np.bool_]:
         """The rasterised current aperture, shape (height, width), read-only."""
         return self._rendering.mask
+
+    @property
+    def part_rotation_deg(self) -> float:
+        """The part's rotation on its mount, degrees counter-clockwise as displayed (0 at start)."""
+        return self._rendering.rotation_deg
 
     def coefficients(self, time_s: float) -> NDArray[np.float64]:
         """``c(t) = zernike_waves + t drift_waves_per_s``, shape (J,), waves."""
@@ -242,46 +242,43 @@ class TestOptic:
                 self._rendering = rendering
         logger.info("test optic aperture changed to %s (revision %d)", shape.kind, rendering.revision)
 
-    def _prepare(self, shape: ApertureShape, revision: int) -> _Rendering:
-        height, width = self._size
-        settings = self._settings
-        mask = shape.mask(height, width)
-        if not mask.any():
-            raise ValueError(f"aperture {shape} covers no pixel of the {height} x {width} frame")
-        cx, cy, radius = Aperture.from_mask(mask).enclosing_circle()
-        rows, cols = np.nonzero(mask)
-        u, v = (cols - cx) / radius, (cy - rows) / radius
-        vectors = [self._coefficients] + ([] if self._drift is None else [self._drift])
-        products = np.empty((rows.size, len(vectors)))
-        stacked = np.column_stack(vectors)
-        for start in range(0, rows.size, _BASIS_BLOCK):
-            block = slice(start, start + _BASIS_BLOCK)
-            products[block] = zernike_basis(self._modes, u[block], v[block]) @ stacked
-        maps = []
-        for k in range(len(vectors)):
-            values = np.full((height, width), np.nan)
-            values[rows, cols] = products[:, k]
-            maps.append(read_only(values))
-        ny, nx = np.indices((height, width), dtype=np.float64) if any(settings.carrier_cycles) else (0.0, 0.0)
-        carrier = 2.0 * np.pi * (settings.carrier_cycles[0] * nx / width - settings.carrier_cycles[1] * ny / height)
-        # wrapped before the cast: float32 then holds the phase to 2.4e-7 rad whatever its size
-        phase = np.mod(2.0 * np.pi * np.where(mask, maps[0], 0.0) + carrier, 2.0 * np.pi).astype(np.float32)
-        phase_drift = None
-        if len(maps) > 1:
-            phase_drift = read_only((2.0 * np.pi * np.where(mask, maps[1], 0.0)).astype(np.float32))
-        index = base_phase = None
+    def reseat_ball(self) -> None:
+        """Re-seat the calibration ball at a random orientation (next frame on); ValueError without a ball."""
+        if self._ball is None:
+            raise ValueError("reseat_ball: the optic has no calibration ball (settings.ball)")
+        with self._aperture_lock:
+            self._ball.reseat()
+            rendering = self._prepare(self._rendering.shape, revision=self._rendering.revision + 1)
+            with self._lock:
+                self._rendering = rendering
+
+    def _prepare(self, shape: ApertureShape, revision: int) -> Rendering:
+        return prepare_rendering(self._settings, self._size, shape, revision, modes=self._modes,
+                                 coefficients=self._coefficients, drift=self._drift, rotation_deg=self._rotation_deg,
+                                 with_surface=self._surface is not None, ball=self._ball)
+
+    def rotate_part(self, angle_deg: float) -> None:
+        """Turn the part on its mount to ``angle_deg`` (absolute, counter-clockwise as displayed).
+
+        The part's Zernike figure (and its drift) turns about the centre of the aperture's unit
+        disk; the reference's error stays fixed in the camera's frame; the next frame is rendered
+        with the new angle (the rendering's revision grows by one, as for a new aperture).
+
+        Raises
+        ------
+        ValueError
+            A non-finite angle, or an optic with a surface map (a polished height map is not
+            turned: the simulator does not resample it).
+        """
+        angle = finite_number(angle_deg, "angle_deg")
         if self._surface is not None:
-            index = np.flatnonzero(mask)
-            base_phase = 2.0 * np.pi * products[:, 0] + (carrier.reshape(-1)[index] if np.ndim(carrier) else carrier)
-        scale = settings.full_scale
-        amplitude = np.where(mask, np.float32(settings.modulation * scale), np.float32(0.0))
-        offset = np.where(mask, np.float32(settings.background * scale), np.float32(settings.halo * scale))
-        return _Rendering(
-            shape=shape, revision=revision, mask=read_only(mask), pupil=(cx, cy, radius),
-            wavefront=maps[0], wavefront_drift=maps[1] if len(maps) > 1 else None,
-            phase=read_only(phase), phase_drift=phase_drift,
-            amplitude=read_only(amplitude), offset=read_only(offset), index=index, base_phase=base_phase,
-        )
+            raise ValueError("rotate_part: the optic has a surface map, which the simulator does not turn")
+        with self._aperture_lock:
+            self._rotation_deg = angle
+            rendering = self._prepare(self._rendering.shape, revision=self._rendering.revision + 1)
+            with self._lock:
+                self._rendering = rendering
+        logger.info("test optic part turned to %.4f deg (revision %d)", angle, rendering.revision)
 
     # ----------------------------------------------------------------------------- frames
 
@@ -369,7 +366,7 @@ class TestOptic:
         return frame, facts
 
     def _render(self, time_s: float, phase_shift_rad: float
-                ) -> tuple[NDArray, _Rendering, SurfaceView | None, FrameFacts]:
+                ) -> tuple[NDArray, Rendering, SurfaceView | None, FrameFacts]:
         t = finite_number(time_s, "time_s")
         shift = finite_number(phase_shift_rad, "phase_shift_rad")
         settings = self._settings
@@ -405,7 +402,7 @@ class TestOptic:
                            rendering.revision, None if view is None else view.surface_revision)
         return frame, rendering, view, facts
 
-    def _surface_view(self, rendering: _Rendering) -> SurfaceView | None:
+    def _surface_view(self, rendering: Rendering) -> SurfaceView | None:
         """The phase and wavefront with the current surface on ``rendering``'s aperture (None: no surface)."""
         if self._surface is None:
             return None
@@ -414,7 +411,7 @@ class TestOptic:
                                   rendering.wavefront)
 
     def _truth(
-        self, rendering: _Rendering, view: SurfaceView | None, t: float, shift: float, vibration: float,
+        self, rendering: Rendering, view: SurfaceView | None, t: float, shift: float, vibration: float,
         carrier: tuple[float, float],
     ) -> OpticTruth:
         wavefront = self._wavefront_at(rendering, view, t, 1)
@@ -432,10 +429,12 @@ class TestOptic:
             carrier_cycles=(float(carrier[0]), float(carrier[1])),
             surface_revision=None if view is None else view.surface_revision,
             surface_nm=None if view is None else view.heights_nm,
+            rotation_deg=rendering.rotation_deg,
+            reference_waves=rendering.reference,
         )
 
     @staticmethod
-    def _wavefront_at(rendering: _Rendering, view: SurfaceView | None, t: float, step: int) -> NDArray[np.float64]:
+    def _wavefront_at(rendering: Rendering, view: SurfaceView | None, t: float, step: int) -> NDArray[np.float64]:
         """``W0 + t D`` (with the surface's part) on every ``step``-th row and column, read-only."""
         wavefront = rendering.wavefront if view is None else view.wavefront  # shared, read-only
         drift = rendering.wavefront_drift

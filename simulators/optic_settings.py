@@ -12,9 +12,57 @@ from typing import Literal
 
 from wavestack.simulators._checks import check_bit_depth, check_seed, finite_number, nonnegative_number, number_pair
 from wavestack.simulators.aperture_shape import ApertureShape
-from wavestack.simulators.surface_settings import SurfaceSettings
+from wavestack.simulators.calibration_ball import BallSettings
+from wavestack.simulators.surface_settings import SurfaceSettings, check_figure_sources
 
 BitDepth = Literal[8, 12, 16]
+
+
+@dataclass(frozen=True)
+class ReferenceSettings:
+    """The interferometer's reference (transmission flat or sphere, relay optics) and its figure error.
+
+    The error is what every measurement sees besides the part: a wavefront fixed in the camera's
+    frame, added to the optic's whatever the part's rotation. It is given in nm of *wavefront*
+    (what the interferometer measures; a reference surface in a Fizeau cavity shows twice its
+    height), on the current aperture's unit disk (the optic's module notes).
+
+    Attributes
+    ----------
+    zernike_nm : tuple of float
+        Noll-ordered unit-RMS coefficients ``c_1, c_2, ...``, nm of wavefront (may be empty).
+    map_file : str or None
+        A measured map (``.dat``, ``.datx``, 4D ``.h5``, ``.npy`` in nm) scaled onto the aperture's
+        disk as the optic's surface map is (:func:`~wavestack.simulators.surface_sources.measured_surface_nm`).
+    map_rms_nm : float or None
+        Scale the map to this RMS over the aperture, nm; only with ``map_file``.
+    wavelength_nm : float
+        Test wavelength, nm (``> 0``): waves = nm / wavelength.
+
+    Raises
+    ------
+    ValueError
+        A field out of range; the message names it.
+
+    Example
+    -------
+    >>> ReferenceSettings(zernike_nm=(0.0, 0.0, 0.0, 0.0, 12.0)).waves_per_nm == 1 / 632.8
+    True
+    """
+
+    zernike_nm: tuple[float, ...] = ()
+    map_file: str | None = None
+    map_rms_nm: float | None = None
+    wavelength_nm: float = 632.8
+
+    def __post_init__(self) -> None:
+        check_figure_sources(self.zernike_nm, self.map_file, self.map_rms_nm)
+        finite_number(self.wavelength_nm, "wavelength_nm", above=0.0)
+
+    @property
+    def waves_per_nm(self) -> float:
+        """Waves of wavefront per nm of wavefront, ``1 / wavelength_nm``."""
+        return 1.0 / self.wavelength_nm
 
 
 @dataclass(frozen=True)
@@ -53,6 +101,12 @@ class OpticSettings:
     surface : SurfaceSettings or None
         The optic's surface as a height map that polishing can change (its wavefront part adds
         to ``zernike_waves``); None: no surface, the wavefront is the Zernike terms alone.
+    reference : ReferenceSettings or None
+        The interferometer's reference error, added to every frame in the camera's frame (it does
+        not turn with the part); None: a perfect reference.
+    ball : BallSettings or None
+        A calibration ball at the confocal position (the random ball test): its figure, in the
+        current seating, adds to the wavefront (the part's terms are then normally zero).
 
     Raises
     ------
@@ -73,6 +127,8 @@ class OpticSettings:
     bit_depth: BitDepth = 12
     seed: int = 0
     surface: SurfaceSettings | None = None
+    reference: ReferenceSettings | None = None
+    ball: BallSettings | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.aperture, ApertureShape):
@@ -95,6 +151,10 @@ class OpticSettings:
         check_seed(self.seed)
         if self.surface is not None and not isinstance(self.surface, SurfaceSettings):
             raise ValueError(f"surface: expected SurfaceSettings or None, got {type(self.surface).__name__}")
+        if self.reference is not None and not isinstance(self.reference, ReferenceSettings):
+            raise ValueError(f"reference: expected ReferenceSettings or None, got {type(self.reference).__name__}")
+        if self.ball is not None and not isinstance(self.ball, BallSettings):
+            raise ValueError(f"ball: expected BallSettings or None, got {type(self.ball).__name__}")
 
     @property
     def full_scale(self) -> int:

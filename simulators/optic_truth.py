@@ -28,7 +28,8 @@ class OpticTruth:
     modes : tuple of (int, int)
         ``(n, m)`` of each coefficient, Noll order from ``j = 1``.
     coefficients_waves : ndarray, shape (J,)
-        ``c(t)``, unit-RMS Zernike coefficients over the disk ``pupil_px``, waves (read-only).
+        ``c(t)``, unit-RMS Zernike coefficients over the disk ``pupil_px``, waves (read-only): the
+        part's own, unturned by ``rotation_deg``.
     pupil_px : (float, float, float)
         The unit disk ``(cx, cy, R)``: centre column, centre row, radius, pixels (module notes).
     wavefront_waves : ndarray, shape (height, width)
@@ -39,7 +40,7 @@ class OpticTruth:
     aperture : ApertureShape
         The aperture in force.
     aperture_revision : int
-        0 for the initial aperture, +1 per :meth:`TestOptic.set_aperture`.
+        0 for the initial aperture, +1 per :meth:`TestOptic.set_aperture` or :meth:`TestOptic.rotate_part`.
     phase_shift_rad : float
         The ``delta`` applied to the frame (0 for :meth:`TestOptic.truth`).
     vibration_rad : float
@@ -50,6 +51,11 @@ class OpticTruth:
         The surface's revision rendered (None: an optic without a surface).
     surface_nm : ndarray or None, shape (height, width)
         The true surface heights rendered, nm, the whole frame (read-only; None without a surface).
+    rotation_deg : float
+        The part's rotation on its mount rendered, degrees counter-clockwise as displayed.
+    reference_waves : ndarray or None, shape (height, width)
+        The reference's error in ``wavefront_waves``, waves, NaN outside the aperture (read-only;
+        None for a perfect reference). The part as seen is ``wavefront_waves - reference_waves``.
     """
 
     time_s: float
@@ -65,6 +71,8 @@ class OpticTruth:
     carrier_cycles: tuple[float, float] = (0.0, 0.0)
     surface_revision: int | None = None
     surface_nm: NDArray[np.float64] | None = None
+    rotation_deg: float = 0.0
+    reference_waves: NDArray[np.float64] | None = None
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from wavestack.simulators._checks import check_seed, finite_number
 
-__all__ = ["MAP_FILE_SUFFIXES", "SurfaceSettings"]
+__all__ = ["MAP_FILE_SUFFIXES", "SurfaceSettings", "check_figure_sources"]
 
 #: Files a measured map may come from (the instrument files of ``read_measured_map`` and ``.npy`` in nm).
 MAP_FILE_SUFFIXES = (".dat", ".datx", ".h5", ".npy")
@@ -73,17 +73,7 @@ class SurfaceSettings:
     def __post_init__(self) -> None:
         if not isinstance(self.zernike_nm, tuple):
             raise ValueError(f"zernike_nm: expected a tuple of numbers, got {type(self.zernike_nm).__name__}")
-        for index, value in enumerate(self.zernike_nm):
-            finite_number(value, f"zernike_nm[{index}]")
-        if self.map_file is not None:
-            if not isinstance(self.map_file, str) or not self.map_file:
-                raise ValueError(f"map_file: expected a file name, got {self.map_file!r}")
-            if Path(self.map_file).suffix.lower() not in MAP_FILE_SUFFIXES:
-                raise ValueError(f"map_file: expected a {', '.join(MAP_FILE_SUFFIXES)} file, got {self.map_file!r}")
-        if self.map_rms_nm is not None:
-            if self.map_file is None:
-                raise ValueError("map_rms_nm: given without map_file; expected both or neither")
-            finite_number(self.map_rms_nm, "map_rms_nm", above=0.0)
+        check_figure_sources(self.zernike_nm, self.map_file, self.map_rms_nm)
         finite_number(self.roughness_rms_nm, "roughness_rms_nm", minimum=0.0)
         finite_number(self.pixel_mm, "pixel_mm", above=0.0)
         correlation = finite_number(self.roughness_correlation_mm, "roughness_correlation_mm", above=0.0)
@@ -98,3 +88,24 @@ class SurfaceSettings:
     def waves_per_nm(self) -> float:
         """Wavefront (waves) per nm of surface height, ``reflection_factor / wavelength_nm``."""
         return self.reflection_factor / self.wavelength_nm
+
+
+def check_figure_sources(zernike_nm: tuple[float, ...], map_file: str | None, map_rms_nm: float | None) -> None:
+    """Check a figure given as Zernike terms (nm) and/or a map file scaled to an RMS (a surface's or a reference's).
+
+    Raises
+    ------
+    ValueError
+        A non-finite term, a map file of another kind, ``map_rms_nm`` without a map or not ``> 0``.
+    """
+    for index, value in enumerate(zernike_nm):
+        finite_number(value, f"zernike_nm[{index}]")
+    if map_file is not None:
+        if not isinstance(map_file, str) or not map_file:
+            raise ValueError(f"map_file: expected a file name, got {map_file!r}")
+        if Path(map_file).suffix.lower() not in MAP_FILE_SUFFIXES:
+            raise ValueError(f"map_file: expected a {', '.join(MAP_FILE_SUFFIXES)} file, got {map_file!r}")
+    if map_rms_nm is not None:
+        if map_file is None:
+            raise ValueError("map_rms_nm: given without map_file; expected both or neither")
+        finite_number(map_rms_nm, "map_rms_nm", above=0.0)

@@ -27,7 +27,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 APP = ROOT / "wavestack"
-SIBLINGS = ("polish", "align", "batch")
+SIBLINGS = ("polish", "align", "batch", "calibrate")
 #: Modules that may import wavestack.simulators (module notes).
 SIMULATOR_USERS = ("wavestack.simulated", "wavestack.station.sim_truth", "wavestack.cli.sim_", "wavestack.bench")
 #: The floors from the ground up; a part may import its own floor's service parts and lower floors only.
@@ -35,7 +35,7 @@ FLOORS = (
     ("config",),
     ("simulated",),
     ("station", "recording", "loop"),
-    ("polish", "align", "batch"),
+    ("polish", "align", "batch", "calibrate"),
     ("figures", "web", "bench"),
     ("cli",),
 )

@@ -6,6 +6,7 @@ from __future__ import annotations
 from .datx import DatxMap, read_datx
 from .errors import InputError
 from .fourd import FourDMap, read_4d
+from .hdf5_open import OpenedHDF5, open_hdf5_readonly
 from .images import FRAME_SUFFIXES, read_frame, read_frame_set
 from .limits import check_allocation
 from .maps import load_map, load_mask
@@ -28,10 +29,12 @@ __all__ = [
     "MeasuredMap",
     "MetroProHeader",
     "MetroProMap",
+    "OpenedHDF5",
     "SUPPORTED_FILES",
     "check_allocation",
     "load_map",
     "load_mask",
+    "open_hdf5_readonly",
     "read_4d",
     "read_datx",
     "read_frame",

@@ -11,6 +11,8 @@
    set, spatially on the first, after an aperture change or when the residue check fails
    (:class:`~wavestack.pipeline.TemporalUnwrapper`);
 4. **quality**: the per-pixel data-quality mask (:mod:`.quality`): marked pixels are NaN in the map;
+   with ``settings.calibration`` the reference's error is subtracted from the map here (a set of
+   another grid or aperture is an invalid result naming why, :mod:`~wavestack.pipeline.calibration`);
 5. **fit**: the fitter of the aperture on the map (less a null test's wavefront), then spike
    clipping (:func:`~.statistics.clip_spikes`); a residual RMS above ``max_residual_waves`` makes
    the result invalid;
@@ -34,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..aperture import DetectionSettings
+from ..calibration import CalibrationRefused
 from ..fit import FitResult, InvalidFrame
 from ..phase import SpatialParams, TemporalUnwrapper
 from .fitter_source import FitterChoice, FitterSource
@@ -261,6 +264,14 @@ class InterferometerProcessor:
         quality = mark_quality(unwrapped.phase, phase.modulation, frames, step, adopted.marks, adopted.components,
                                self.settings.quality)
         waves = quality.waves
+        calibration = self.settings.calibration
+        if calibration is not None:  # the reference's error, measured and removed
+            try:
+                calibration.check_measurement(frames[0].shape)
+                waves = waves - calibration.correction(adopted.fitted, step)
+            except CalibrationRefused as error:
+                return PreparedSet(self._invalid(f"calibration: {error}", timings_s=timings, error=error,
+                                                 **self._extras(phase)))
         to_fit = waves if adopted.null_waves is None else waves - adopted.null_waves
         timings["quality"] = time.perf_counter() - tick
 
@@ -329,7 +340,11 @@ class InterferometerProcessor:
         return dict(choice=prepared.choice, aperture=adopted.aperture, aperture_changed=prepared.aperture_changed,
                     unwrap_path=prepared.unwrap_path, waves=prepared.waves, flags=prepared.flags,
                     quality=PixelQuality.of(prepared.flags), timings_s=timings, aperture_choice=adopted.choice,
-                    edge=adopted.edge, **self._extras(prepared.phase))
+                    edge=adopted.edge, calibration=self._calibration_digest(), **self._extras(prepared.phase))
+
+    def _calibration_digest(self) -> str | None:
+        calibration = self.settings.calibration
+        return None if calibration is None else calibration.digest
 
     @staticmethod
     def _extras(phase: PhaseMaps | None) -> dict[str, object]:

@@ -53,6 +53,8 @@ class InstrumentOutcome(Protocol):
     def timings_s(self) -> dict[str, float]: ...
     @property
     def new_aperture_mask(self) -> NDArray[np.bool_] | None: ...
+    @property
+    def calibration(self) -> str | None: ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +102,9 @@ class InterferometerOutcome:
     error : ValueError or None
         What made the outcome invalid, for a caller that wants more than ``reason`` (e.g. the
         advice of an :class:`~wavestack.pipeline.IllConditionedBasis`).
+    calibration : str or None
+        The content hash (SHA-256, hex) of the reference calibration subtracted from ``waves``
+        before the fit; None when none was.
     """
 
     valid: bool
@@ -121,6 +126,7 @@ class InterferometerOutcome:
     aperture_choice: str | None = None
     edge: EdgeCircle | None = None
     error: ValueError | None = None
+    calibration: str | None = None
 
     # -- what the result records (pure views of the fields above)
     @property

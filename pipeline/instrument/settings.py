@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from ..aperture import DetectionSettings
+from ..calibration import ReferenceCalibration
 from ..zernike import ConicTest
 from .fitter_source import FitSettings
 
@@ -94,6 +95,9 @@ class InterferometerSettings:
         the residual's PV at about 12 times its RMS.
     null : ConicNull or None
         A conic's null wavefront subtracted before the fit (``analyze --null-conic``).
+    calibration : ReferenceCalibration or None
+        The reference's error subtracted from every unwrapped map before the fit (``--calibration``);
+        a set of another grid or aperture is an invalid result naming why, never resampled.
     """
 
     method: Literal["psi", "carrier"] = "psi"
@@ -114,3 +118,4 @@ class InterferometerSettings:
     quality: QualitySettings = field(default_factory=QualitySettings)
     clip_sigma: float | None = 6.0
     null: ConicNull | None = None
+    calibration: ReferenceCalibration | None = None

@@ -140,6 +140,7 @@ class SlopeOutcome:
     unwrap_path = None
     new_aperture_mask = None  # the lit set is in the result's aperture record; no mask is recorded
     quality = None  # no per-lenslet quality counts yet
+    calibration = None  # a reference calibration applies to interferometer maps
 
     @property
     def statistics(self) -> MapStatistics:

@@ -10,7 +10,7 @@ from wavestack.cli.command import Command
 
 def test_every_command_is_registered_once_in_order() -> None:
     assert [c.name for c in COMMANDS] == ["run", "replay", "fit", "analyze", "bench", "sim", "plc", "polish", "align",
-                                          "batch"]
+                                          "batch", "calibrate"]
     parser = build_parser()
     (subparsers,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
     assert list(subparsers.choices) == [c.name for c in COMMANDS]

@@ -58,6 +58,8 @@ MODULES_WITH_EXAMPLES = (
     "wavestack.pipeline.surface.slope",  # slope_maps
     "wavestack.pipeline.surface.areal_filter",  # filter_surface, parse_areal_filter
     "wavestack.pipeline.surface.compliance",  # check_form
+    "wavestack.pipeline.averaging.robust",  # robust_average
+    "wavestack.pipeline.calibration.rotation",  # rotate_coefficients, solve_rotation_test
     "wavestack.pipeline.surface.figures",  # SurfaceAnalyzer
 )
 

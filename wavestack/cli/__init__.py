@@ -27,7 +27,7 @@ from collections.abc import Sequence  # noqa: E402
 from typing import NoReturn  # noqa: E402
 
 from wavestack import __version__  # noqa: E402
-from wavestack.cli import align, analyze, batch, bench, fit, plc, polish, replay, run, sim  # noqa: E402
+from wavestack.cli import align, analyze, batch, bench, calibrate, fit, plc, polish, replay, run, sim  # noqa: E402
 from wavestack.drivers.errors import DeviceError  # noqa: E402
 from wavestack.pipeline import InputError  # noqa: E402
 
@@ -36,7 +36,8 @@ EXIT_BAD_INPUT = 2
 EXIT_DEVICE_ERROR = 3
 
 #: The subcommands (each module declares its own), in the order ``wavestack --help`` lists them.
-COMMANDS = tuple(module.COMMAND for module in (run, replay, fit, analyze, bench, sim, plc, polish, align, batch))
+COMMANDS = tuple(module.COMMAND for module in (run, replay, fit, analyze, bench, sim, plc, polish, align, batch,
+                                                  calibrate))
 
 __all__ = ["COMMANDS", "EXIT_BAD_INPUT", "EXIT_DEVICE_ERROR", "EXIT_INTERNAL_ERROR", "build_parser", "error_line", "main",
            "one_line", "run_command"]

@@ -54,6 +54,8 @@ def add_analyze_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--direction", choices=("ccw", "cw"), help="phase-step direction (default ccw)")
     parser.add_argument("--carrier-sign", type=int, choices=(1, -1),
                         help="sign of a single carrier frame's phase (+1, the default, or -1, for the tilt direction)")
+    parser.add_argument("--calibration", type=Path, metavar="CAL.h5",
+                        help="subtract this reference calibration from the map (interferograms of its camera grid)")
     parser.add_argument("--wavelength-nm", type=wavelength_nm,
                         help="test wavelength, 1 nm to 1 mm (required for images without --config; files carry it)")
     parser.add_argument("--modes", type=MODES_ARGUMENT, help="Zernike terms fitted (default 36)")
@@ -94,6 +96,9 @@ def _measure(args: argparse.Namespace) -> tuple[argparse.Namespace, Interferomet
             raise InputError(f"{paths[0]}: a measured map (.dat/.datx/.h5) is analysed on its own; got {len(paths)} files")
         if args.config is not None:
             raise InputError(f"{paths[0]}: --config applies to interferograms; a measured map has no processing")
+        if args.calibration is not None:
+            raise InputError(f"{paths[0]}: --calibration applies to interferograms of the calibrated camera grid, "
+                             "not to a measured map")
         refuse_for_measured_map(args, paths[0])
         args = with_defaults(args)
         measured, wavelength, pixels = read_map_wavefront(paths[0], args.wavelength_nm)
@@ -154,6 +159,8 @@ def run_analyze(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         save_npy(save_to, analysed)
     report = _report(args, outcome, wavelength_nm, float(np.nanstd(analysed)))
     _implied_conic(args, outcome, wavelength_nm, report)
+    if outcome.calibration is not None:
+        report["calibration_sha256"] = outcome.calibration
     map_report(report, pixels, fit.valid_count)
     surface, report["surface"] = _surface_figures(args, outcome, settings, wavelength_nm, pixels, fitter.basis.pupil)
     if plot_to is not None:

@@ -21,6 +21,7 @@ import numpy as np
 
 from wavestack.config import ConfigError, StationConfig, load_station_config
 from wavestack.pipeline import InputError
+from wavestack.pipeline.calibration import CalibrationRefused, read_calibration
 from wavestack.pipeline.instrument import ConicNull, FitSettings, InterferometerSettings, QualitySettings
 from wavestack.pipeline.zernike import ConicTest
 from wavestack.station import interferometer_settings
@@ -84,7 +85,7 @@ def analyze_settings(args: argparse.Namespace, frame_count: int, config: Station
     aperture = args.aperture if args.mask is None else "detected"
     if config is not None:
         settings = interferometer_settings(config)
-        return dataclasses.replace(settings, aperture=aperture, null=null)
+        return _calibrated(args, dataclasses.replace(settings, aperture=aperture, null=null), wavelength_nm)
     first = args.files[0]
     if frame_count == 1 and args.method not in (None, "carrier"):
         raise InputError(f"{first}: one frame can only be analysed by the carrier method; got --method {args.method}")
@@ -95,12 +96,25 @@ def analyze_settings(args: argparse.Namespace, frame_count: int, config: Station
     fit = FitSettings(method=args.fit_method, modes=args.modes, ordering=args.ordering, remove=args.remove,
                       obscuration=args.obscuration, dtype="float64")
     quality = QualitySettings() if args.min_modulation is None else QualitySettings(min_modulation=args.min_modulation)
-    return InterferometerSettings(
+    return _calibrated(args, InterferometerSettings(
         method="carrier" if frame_count == 1 else "psi",
         psi_algorithm={None: "lsq", "psi": "lsq", "aia": "aia", "pca": "pca", "carrier": "lsq"}[args.method],
         steps_rad=None if args.steps is None else tuple(float(s) for s in args.steps), direction=args.direction,
         carrier_sign=args.carrier_sign, aperture=aperture, fit=fit, quality=quality,
-        clip_sigma=None if args.no_clip else args.clip_sigma, null=null)
+        clip_sigma=None if args.no_clip else args.clip_sigma, null=null), wavelength_nm)
+
+
+def _calibrated(args: argparse.Namespace, settings: InterferometerSettings,
+                wavelength_nm: float) -> InterferometerSettings:
+    """``settings`` with ``--calibration`` in force (read, its hash and wavelength checked)."""
+    if getattr(args, "calibration", None) is None:
+        return settings
+    try:
+        calibration = read_calibration(args.calibration)
+        calibration.check_measurement(calibration.grid, wavelength_nm)
+    except CalibrationRefused as error:
+        raise InputError(f"--calibration {error}") from None
+    return dataclasses.replace(settings, calibration=calibration)
 
 
 def _null(args: argparse.Namespace, wavelength_nm: float) -> ConicNull | None:

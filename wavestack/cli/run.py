@@ -23,6 +23,7 @@ from wavestack.cli.outputs import json_text
 from wavestack.cli.signals import stop_on_signals
 from wavestack.cli.web_view import add_web_arguments, open_web_view
 from wavestack.config import load_station_config
+from wavestack.config.station import with_calibration
 from wavestack.recording import StationRecorder, check_recording_path, open_recording
 from wavestack.station import (
     CycleRecord,
@@ -44,6 +45,8 @@ def add_run_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true",
                         help="one JSON object per line (results, then a summary) instead of the live view")
     parser.add_argument("--record", metavar="FILE.h5", help="record frames, apertures and results (HDF5)")
+    parser.add_argument("--calibration", type=Path, metavar="CAL.h5",
+                        help="subtract this reference calibration from every map (overrides [processing] calibration)")
     add_web_arguments(parser)
 
 
@@ -101,6 +104,8 @@ def run_station(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     # every path first: a typo in --record must not cost opening (and homing) every device
     record_to = check_recording_path(args.record) if args.record else None  # never over a recording
     config = load_station_config(args.config)
+    if args.calibration is not None:
+        config = with_calibration(config, args.calibration)
     stop = threading.Event()
     out = sys.stdout
     with ExitStack() as stack, stop_on_signals(stop):

@@ -58,6 +58,8 @@ class ProcessingSettings:
     check_fringe_order: bool = setting(True, doc="leave out pixels whose fringe order is not trusted")
     spike_clip: bool = setting(True, doc="leave out pixels whose fit residual exceeds clip_sigma residual RMS")
     clip_sigma: float = setting(6.0, minimum=1.0, maximum=1000.0, doc="the spike clip's limit, in residual RMS")
+    calibration: str | None = setting(None, doc="a reference calibration (wavestack calibrate --out), subtracted "
+                                                "from every map; a path relative to this file")
 
     @property
     def frames_per_set(self) -> int:

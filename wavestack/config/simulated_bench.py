@@ -1,4 +1,5 @@
-"""The simulated bench's tables of a station file: ``[optic]`` (with ``[optic.aperture]``, ``[optic.surface]``), ``[bench]``, ``[lenslets]``.
+"""The simulated bench's tables of a station file: ``[optic]`` (with ``[optic.aperture]``, ``[optic.surface]``,
+``[optic.reference]``, ``[optic.ball]``), ``[bench]``, ``[lenslets]``.
 
 What a station file may say about the test optic, the piezo's coupling to the fringes and the
 lenslet array of a simulated Shack-Hartmann camera: settings only, with the bounds a key must
@@ -15,8 +16,8 @@ from typing import Literal
 
 from wavestack.config.schema import setting
 
-__all__ = ["ApertureShapeSettings", "BenchSimulatorSettings", "LensletSimulatorSettings", "OpticSimulatorSettings",
-           "SurfaceSimulatorSettings"]
+__all__ = ["ApertureShapeSettings", "BallSimulatorSettings", "BenchSimulatorSettings", "LensletSimulatorSettings", "OpticSimulatorSettings",
+           "ReferenceSimulatorSettings", "SurfaceSimulatorSettings"]
 
 BitDepth = Literal[8, 12, 16]
 
@@ -51,6 +52,28 @@ class SurfaceSimulatorSettings:
 
 
 @dataclass(frozen=True)
+class ReferenceSimulatorSettings:
+    """``[optic.reference]``: the interferometer's reference error, nm of wavefront, fixed in the camera's frame."""
+
+    zernike_nm: tuple[float, ...] = setting((), doc="Noll c1, c2, ... of the reference's error, nm of wavefront")
+    map_file: str | None = setting(None, doc="a measured map (.dat, .datx, 4D .h5, .npy in nm)")
+    map_rms_nm: float | None = setting(None, minimum=0.0, doc="scale the map to this RMS, nm")
+    wavelength_nm: float = setting(632.8, minimum=0.0, doc="default: [station] wavelength_nm")
+
+
+@dataclass(frozen=True)
+class BallSimulatorSettings:
+    """``[optic.ball]``: a calibration ball at the confocal position (the random ball test), re-seated at random."""
+
+    figure_nm: float = setting(10.0, minimum=0.0, doc="the ball's figure over the whole sphere, nm RMS of wavefront")
+    cap_half_angle_deg: float = setting(30.0, minimum=0.0, maximum=90.0, doc="the cap the interferometer sees")
+    terms: int = setting(40, minimum=1, doc="plane waves of the random figure")
+    max_frequency: float = setting(12.0, minimum=1.0, doc="largest spatial frequency, radians per radian")
+    seed: int = setting(0, minimum=0)
+    wavelength_nm: float = setting(632.8, minimum=0.0, doc="default: [station] wavelength_nm")
+
+
+@dataclass(frozen=True)
 class OpticSimulatorSettings:
     """``[optic]``: the simulated test optic, its fringes and how the camera sees them."""
 
@@ -68,6 +91,8 @@ class OpticSimulatorSettings:
     bit_depth: BitDepth = 12
     seed: int = setting(0, minimum=0)
     surface: SurfaceSimulatorSettings | None = None
+    reference: ReferenceSimulatorSettings | None = None
+    ball: BallSimulatorSettings | None = None
 
 
 @dataclass(frozen=True)

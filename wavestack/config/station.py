@@ -52,6 +52,7 @@ from wavestack.config.shack_hartmann import ShackHartmannSettings
 from wavestack.config.simulated_bench import BenchSimulatorSettings, LensletSimulatorSettings, OpticSimulatorSettings
 from wavestack.config.station_rules import check_station_rules
 from wavestack.config.station_schema import OutputSettings, StationConfig, StationSettings
+from wavestack.pipeline.calibration import CalibrationRefused, read_calibration
 
 _TABLES = ("station", "processing", "camera", "pzt", "plc", "outputs", "optic", "bench", "shack_hartmann",
            "lenslets", "surface")
@@ -114,6 +115,9 @@ def parse_station_config(text: str, *, source: str) -> StationConfig:
     )
     config.surface.request(source)  # a tolerance that cannot be read is refused with the file
     check_station_rules(config)
+    if config.processing.calibration is not None:
+        path = Path(config.processing.calibration)
+        config = with_calibration(config, path if path.is_absolute() else Path(source).parent / path)
     return config
 
 
@@ -157,25 +161,30 @@ def _parse_shack_hartmann(document: Mapping[str, Any], station: StationSettings,
 
 def _simulated_surface(optic: OpticSimulatorSettings, table: Mapping[str, Any], station: StationSettings,
                        source: str) -> OpticSimulatorSettings:
-    """``optic`` with ``[optic.surface]`` completed: the map file found, the wavelength the station's."""
-    surface = optic.surface
-    if surface is None:
-        return optic
-    given = table["surface"]  # parse_section has checked it is a table
+    """``optic`` with ``[optic.surface]``, ``[optic.reference]``, ``[optic.ball]`` completed: map files found, the
+    station's wavelength."""
+    changes = {name: _completed(getattr(optic, name), table, name, station, source)
+               for name in ("surface", "reference", "ball") if getattr(optic, name) is not None}
+    return dataclasses.replace(optic, **changes)
+
+
+def _completed(sub: Any, table: Mapping[str, Any], name: str, station: StationSettings, source: str) -> Any:
+    """A sub-table of ``[optic]`` (surface, reference, ball) with its map file found and the station's wavelength."""
+    given = table[name]  # parse_section has checked it is a table
     changes: dict[str, Any] = {}
     if "wavelength_nm" not in given:
         changes["wavelength_nm"] = station.wavelength_nm
-    elif surface.wavelength_nm != station.wavelength_nm:
-        raise ConfigError(f"{source}: [optic.surface] wavelength_nm = {surface.wavelength_nm:g} does not match "
+    elif sub.wavelength_nm != station.wavelength_nm:
+        raise ConfigError(f"{source}: [optic.{name}] wavelength_nm = {sub.wavelength_nm:g} does not match "
                           f"[station] wavelength_nm = {station.wavelength_nm:g}; expected the same or no key")
-    if surface.map_file is not None:
-        path = Path(surface.map_file)
+    if getattr(sub, "map_file", None) is not None:
+        path = Path(sub.map_file)
         if not path.is_absolute():
             path = Path(source).parent / path
         if not path.is_file():
-            raise ConfigError(f"{source}: [optic.surface] map_file = {surface.map_file!r}: no such file ({path})")
+            raise ConfigError(f"{source}: [optic.{name}] map_file = {sub.map_file!r}: no such file ({path})")
         changes["map_file"] = str(path)
-    return dataclasses.replace(optic, surface=dataclasses.replace(surface, **changes))
+    return dataclasses.replace(sub, **changes)
 
 
 def _simulated_lenslets(table: Any, sensor: ShackHartmannSettings, station: StationSettings,
@@ -211,3 +220,30 @@ def load_station_config(path: str | Path | None = None) -> StationConfig:
     """Read and check a station file (None: the packaged ``default.toml``, the simulated station)."""
     path = DEFAULT_CONFIG if path is None else Path(path)
     return parse_station_config(read_config_text(path), source=str(path))
+
+
+def with_calibration(config: StationConfig, path: str | Path) -> StationConfig:
+    """The station with the reference calibration of ``path`` read, checked and in force.
+
+    The file must be whole (its content hash), of the station's wavelength and, for a simulated
+    camera, of its grid (a real camera's grid is checked on every set: a set of another grid or
+    aperture is an invalid result naming why).
+
+    Raises
+    ------
+    ConfigError
+        One line naming the station file, the calibration and the reason.
+    """
+    if config.station.kind != "interferometer":
+        raise ConfigError(f"{config.source}: [processing] calibration: a reference calibration applies to an "
+                          "interferometer station")
+    try:
+        calibration = read_calibration(path)
+        calibration.check_measurement(calibration.grid, config.station.wavelength_nm)
+        if config.camera.simulated:
+            sim = config.camera_simulator
+            calibration.check_measurement((sim.height, sim.width))
+    except CalibrationRefused as error:
+        raise ConfigError(f"{config.source}: [processing] calibration: {error}") from None
+    processing = dataclasses.replace(config.processing, calibration=str(path))
+    return dataclasses.replace(config, processing=processing, calibration=calibration)

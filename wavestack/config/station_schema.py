@@ -17,6 +17,7 @@ from wavestack.config.schema import setting
 from wavestack.config.shack_hartmann import ShackHartmannSettings
 from wavestack.config.simulated_bench import BenchSimulatorSettings, LensletSimulatorSettings, OpticSimulatorSettings
 from wavestack.config.surface import SurfaceSettings
+from wavestack.pipeline.calibration import ReferenceCalibration
 
 __all__ = ["OutputSettings", "StationConfig", "StationSettings"]
 
@@ -78,6 +79,7 @@ class StationConfig:
     shack_hartmann: ShackHartmannSettings | None = None
     lenslets: LensletSimulatorSettings | None = None
     surface: SurfaceSettings = SurfaceSettings()
+    calibration: ReferenceCalibration | None = None  # [processing] calibration, read and checked
 
     @property
     def phase_stepping(self) -> bool:

@@ -97,7 +97,8 @@ def conventions(config: StationConfig) -> dict[str, str | float | int]:
     return {"ordering": p.ordering, "normalisation": "rms", "coefficient_units": "waves of wavefront",
             "first_index": 1, "wavelength_nm": config.station.wavelength_nm,
             "method": "shack-hartmann" if shack_hartmann else p.method,
-            "fit_method": "modal" if shack_hartmann else p.fit_method, "remove": p.remove, "modes": p.modes}
+            "fit_method": "modal" if shack_hartmann else p.fit_method, "remove": p.remove, "modes": p.modes,
+            "calibration_sha256": "" if config.calibration is None else config.calibration.digest}
 
 
 def open_recording(path: str, config: StationConfig, frame_shape: tuple[int, int], frame_dtype: Any,

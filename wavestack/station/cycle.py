@@ -73,7 +73,7 @@ def make_result(index: int, frames: tuple[Frame, ...], outcome: ProcessorOutcome
         fitter_diagnostics=outcome.diagnostics, aperture=outcome.aperture_record, unwrap_path=outcome.unwrap_path,
         counters=counters, timings_ms={k: v * 1e3 for k, v in outcome.timings_s.items()},
         truth_rms=truth.truth_rms if truth is not None else None,
-        truth_error_rms=truth.error_rms if truth is not None else None)
+        truth_error_rms=truth.error_rms if truth is not None else None, calibration=outcome.calibration)
 
 
 def with_output(result: StationResult, output: OutputRecord | None, *, now_ns: int | None = None) -> StationResult:

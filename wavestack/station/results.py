@@ -148,6 +148,9 @@ class StationResult:
     surface : SurfaceRecord or None
         With ``[surface] enabled``: the ISO form figures, PVr and the drawing's verdict of the
         measured surface (nm), on valid interferometer results.
+    calibration : str or None
+        The content hash (SHA-256, hex) of the reference calibration subtracted from the map
+        (``[processing] calibration``, ``--calibration``); None without one.
     """
 
     index: int
@@ -176,6 +179,7 @@ class StationResult:
     pvr: float = float("nan")
     quality: PixelQuality | None = None
     surface: SurfaceRecord | None = None
+    calibration: str | None = None
 
     @classmethod
     def invalid(cls, index: int, reason: str, counters: Counters, *, ordering: str,

@@ -49,7 +49,7 @@ class InterferometerTruthCheck:
 
     bench: SimulatedInterferometer
     fit_decimation: int
-    _key: tuple[int, int] | None = field(default=None, init=False)  # (fitter, aperture revision) of the line
+    _key: tuple[int, int, bool] | None = field(default=None, init=False)  # (fitter, aperture revision, calibrated)
     _line: tuple[float, NDArray, NDArray] = field(default=(0.0, np.zeros(0), np.zeros(0)), init=False)
 
     def capture(self, frame: Frame) -> object | None:
@@ -64,7 +64,7 @@ class InterferometerTruthCheck:
         if truth.source.aperture_revision != truth.aperture_revision:
             return TruthErrors(None, None)  # the optic's aperture changed after this frame: its truth is gone
         try:
-            true_coefficients = self._true_coefficients(truth, outcome.choice)
+            true_coefficients = self._true_coefficients(truth, outcome.choice, outcome.calibration is not None)
         except InvalidFrame as error:  # the optic's aperture changed within the set: nothing to compare
             logger.debug("no truth comparison: %s", error)
             return TruthErrors(None, None)
@@ -73,8 +73,11 @@ class InterferometerTruthCheck:
         return TruthErrors(fitter.surface_rms(true_coefficients),
                            fitter.surface_rms(outcome.fit.coefficients - true_coefficients))
 
-    def _true_coefficients(self, truth: FrameTruth, choice: FitterChoice) -> NDArray:
+    def _true_coefficients(self, truth: FrameTruth, choice: FitterChoice, calibrated: bool) -> NDArray:
         """The simulator's true coefficients in this fitter's basis at the frame's time, ``a + (t - t0) b``.
+
+        ``calibrated``: the map had the reference's error removed, so the truth is the part alone
+        (the optic's wavefront less its reference's error).
 
         The simulated optic drifts linearly in time and the fit is linear in the map, so the true
         coefficients at any frame time follow from two fits per fitter and aperture revision (at
@@ -85,11 +88,14 @@ class InterferometerTruthCheck:
         :meth:`~wavestack.simulators.optic.TestOptic.wavefront`), the values the fit of the full
         map's slice used: the same coefficients, a quarter of the memory at decimation 2.
         """
-        key = (id(choice.fitter), truth.aperture_revision)
+        key = (id(choice.fitter), truth.aperture_revision, calibrated)
         if self._key != key or abs(truth.time_s - self._line[0]) > _REANCHOR_S:
             t0 = truth.time_s
-            start = self._fit(truth.source.wavefront(t0, self.fit_decimation), choice)
-            later = self._fit(truth.source.wavefront(t0 + 1.0, self.fit_decimation), choice)
+            step = self.fit_decimation
+            reference = truth.source.truth(t0).reference_waves if calibrated else None
+            less = 0.0 if reference is None else reference[::step, ::step]
+            start = self._fit(truth.source.wavefront(t0, step) - less, choice)
+            later = self._fit(truth.source.wavefront(t0 + 1.0, step) - less, choice)
             self._key, self._line = key, (t0, start, later - start)
         t0, start, per_second = self._line
         return start + (truth.time_s - t0) * per_second

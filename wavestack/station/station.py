@@ -39,6 +39,8 @@ stop event is seen within one slice.
 
 from __future__ import annotations
 
+import dataclasses
+
 import logging
 import threading
 import time
@@ -395,8 +397,10 @@ class Station:
 
 
 def interferometer_settings(config: StationConfig) -> InterferometerSettings:
-    """The interferometer processor's settings of a station: ``[processing]``, saturating at the camera's full scale."""
-    return config.processing.interferometer(saturation_counts=float(2 ** BIT_DEPTH[config.camera.pixel_format] - 1))
+    """The interferometer processor's settings of a station: ``[processing]``, saturating at the camera's full scale,
+    with its reference calibration (``[processing] calibration``) subtracted from every map."""
+    settings = config.processing.interferometer(saturation_counts=float(2 ** BIT_DEPTH[config.camera.pixel_format] - 1))
+    return settings if config.calibration is None else dataclasses.replace(settings, calibration=config.calibration)
 
 
 def build_processor(config: StationConfig, fitters: FitterSource | None = None) -> Processor:
