@@ -69,16 +69,9 @@ def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
     rotation.add_argument("--positions", type=positive_int, default=4, metavar="N", help="rotations (>= 2; default 4)")
     rotation.add_argument("--maps", type=positive_int, default=8, metavar="M",
                           help="valid maps averaged per position (>= 3; default 8)")
-    rotation.add_argument("--config", type=Path, help="station TOML (default: the simulated calibration station)")
     rotation.add_argument("--stage", type=Path, help="rotation stage TOML, [rotation_stage] (default: simulated)")
     rotation.add_argument("--start-deg", type=finite_float, default=0.0, metavar="DEG", help="first angle (default 0)")
-    rotation.add_argument("--settle-s", type=finite_float, default=0.2, metavar="S",
-                          help="maps count only if exposed this long after the stage arrived (default 0.2)")
-    rotation.add_argument("--modes", type=positive_int, default=36, metavar="J", help="Noll terms fitted (default 36)")
-    rotation.add_argument("--edge-px", type=int, default=2, metavar="PX", help="rim pixels left out (default 2)")
-    rotation.add_argument("--out", type=Path, metavar="CAL.h5",
-                          help="write the reference's calibration (HDF5, with its content hash); never overwritten")
-    rotation.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_measuring_options(rotation, "the simulated calibration station", "the stage arrived")
     ball = methods.add_parser(
         "reference", help="random ball test: the reference's error from N seatings of a calibration ball",
         description="Measure a calibration ball at the confocal position in N random seatings (the operator "
@@ -87,14 +80,19 @@ def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
     ball.add_argument("--seatings", type=positive_int, default=32, metavar="N", help="seatings (>= 3; default 32)")
     ball.add_argument("--maps", type=positive_int, default=4, metavar="M",
                       help="valid maps averaged per seating (>= 3; default 4)")
-    ball.add_argument("--config", type=Path, help="station TOML (default: the simulated ball station)")
-    ball.add_argument("--settle-s", type=finite_float, default=0.2, metavar="S",
-                      help="maps count only if exposed this long after the seating (default 0.2)")
-    ball.add_argument("--modes", type=positive_int, default=36, metavar="J", help="Noll terms fitted (default 36)")
-    ball.add_argument("--edge-px", type=int, default=2, metavar="PX", help="rim pixels left out (default 2)")
-    ball.add_argument("--out", type=Path, metavar="CAL.h5",
-                      help="write the reference's calibration (HDF5, with its content hash); never overwritten")
-    ball.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_measuring_options(ball, "the simulated ball station", "the seating")
+
+
+def _add_measuring_options(parser: argparse.ArgumentParser, default_station: str, settled_after: str) -> None:
+    """The options every calibration method shares: the station, the maps' settling, the fit, the output."""
+    parser.add_argument("--config", type=Path, help=f"station TOML (default: {default_station})")
+    parser.add_argument("--settle-s", type=finite_float, default=0.2, metavar="S",
+                        help=f"maps count only if exposed this long after {settled_after} (default 0.2)")
+    parser.add_argument("--modes", type=positive_int, default=36, metavar="J", help="Noll terms fitted (default 36)")
+    parser.add_argument("--edge-px", type=int, default=2, metavar="PX", help="rim pixels left out (default 2)")
+    parser.add_argument("--out", type=Path, metavar="CAL.h5",
+                        help="write the reference's calibration (HDF5, with its content hash); never overwritten")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
 def run_calibrate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
